@@ -1,0 +1,33 @@
+"""granchain: pulse propagation in one-dimensional granular chains.
+
+The founding reference is U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg,
+"Pulse propagation in decorated random chains". Rescaled units as in its Sec. II.
+"""
+
+from ._chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered
+from ._distributions import Truncated, Uniform, as_distribution
+from ._effective import effective, effective_parameters
+from ._random import draw_small_radii, random_decorated, realization_rng
+from ._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Chain",
+    "EFFECTIVE_VALIDITY_LIMIT",
+    "EffectiveValidityWarning",
+    "Truncated",
+    "Uniform",
+    "as_distribution",
+    "decorated",
+    "draw_small_radii",
+    "effective",
+    "effective_parameters",
+    "from_radii",
+    "monodisperse",
+    "random_decorated",
+    "realization_rng",
+    "regular_decorated",
+    "sphere_stiffness",
+    "tapered",
+]

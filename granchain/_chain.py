@@ -1,0 +1,211 @@
+"""One representation for every chain, and the builders that make one.
+
+A :class:`Chain` is granules 1..M on a line, just touching (no precompression),
+all at rest except granule 1 which moves with ``initial_velocity``. Neighbours
+k, k+1 repel with the power-law potential (c_k / n) delta^n while
+delta = x_k - x_{k+1} > 0 (paper Eq. hertz-1 in the rescaled form of Eq.
+motion_rescaled). Everything the integrators need is in ``masses``,
+``stiffness``, ``n`` and ``initial_velocity``; ``observed`` names the granules
+whose peak velocity and peak time are recorded.
+
+Units are the paper's rescaled ones (Sec. II): radii in units of the radius of
+the reference (first, large) granule, masses m = R^3 in units of its mass, time
+and displacement as in Eq. (motion_rescaled).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._validate import count, exponent, finite_scalar, positive_array
+
+__all__ = [
+    "Chain",
+    "from_radii",
+    "monodisperse",
+    "tapered",
+    "decorated",
+    "regular_decorated",
+    "sphere_stiffness",
+]
+
+HERTZ = 2.5
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """A granular chain in rescaled units (paper Eq. motion_rescaled).
+
+    Parameters
+    ----------
+    masses : (M,) array, M >= 2
+        Granule masses m_k > 0.
+    stiffness : (M-1,) array
+        Contact prefactors c_k > 0: the force between k and k+1 is
+        c_k * delta^(n-1) for delta > 0 (paper: r_k for spheres, Eq. r-prime;
+        r_k / 2^(n-1) in the effective chain, Eq. effec-int).
+    n : float
+        Exponent of the contact potential (c/n) delta^n; n > 1. Hertz: 2.5.
+    initial_velocity : float
+        Velocity of granule 1 at t = 0 (the impulse); 1 in the paper's units.
+    observed : (K,) int array, optional
+        0-based indices of the granules whose pulse is recorded, ascending
+        (default: all). For decorated chains these are the large granules.
+    radii : (M,) array or None
+        Radii the chain was built from (None for an effective chain).
+    kind : str
+        A short description ("radii", "decorated", "effective", ...).
+    """
+
+    masses: np.ndarray
+    stiffness: np.ndarray
+    n: float = HERTZ
+    initial_velocity: float = 1.0
+    observed: np.ndarray | None = None
+    radii: np.ndarray | None = None
+    kind: str = "custom"
+    meta: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self):
+        m = positive_array("masses", self.masses, min_size=2)
+        c = positive_array("stiffness", self.stiffness)
+        if c.size != m.size - 1:
+            raise ValueError(
+                f"stiffness needs one entry per contact (len(masses) - 1 = {m.size - 1}), got {c.size}"
+            )
+        n = exponent(self.n)
+        v0 = finite_scalar("initial_velocity", self.initial_velocity, positive=True)
+        if self.observed is None:
+            obs = np.arange(m.size, dtype=np.int64)
+        else:
+            obs = np.asarray(self.observed)
+            if obs.ndim != 1 or obs.size == 0 or not np.issubdtype(obs.dtype, np.integer):
+                raise ValueError("observed must be a non-empty 1-d sequence of 0-based granule indices")
+            obs = obs.astype(np.int64)
+            if obs.min() < 0 or obs.max() >= m.size:
+                raise ValueError(f"observed indices must lie in 0..{m.size - 1} (0-based), got {obs.tolist()}")
+            if np.any(np.diff(obs) <= 0):
+                raise ValueError("observed indices must be strictly increasing (no repeats)")
+        radii = None if self.radii is None else positive_array("radii", self.radii, min_size=m.size)
+        if radii is not None and radii.size != m.size:
+            raise ValueError(f"radii has {radii.size} entries for {m.size} granules")
+        object.__setattr__(self, "masses", _frozen(m))
+        object.__setattr__(self, "stiffness", _frozen(c))
+        object.__setattr__(self, "n", n)
+        object.__setattr__(self, "initial_velocity", v0)
+        object.__setattr__(self, "observed", _frozen(obs))
+        object.__setattr__(self, "radii", None if radii is None else _frozen(radii))
+
+    # -- derived quantities -------------------------------------------------
+    @property
+    def size(self) -> int:
+        """Number of granules M."""
+        return int(self.masses.size)
+
+    @property
+    def energy(self) -> float:
+        """Total energy, all kinetic at t = 0: m_1 v_1^2 / 2."""
+        return 0.5 * float(self.masses[0]) * self.initial_velocity**2
+
+    @property
+    def momentum(self) -> float:
+        """Total momentum m_1 v_1 (conserved: free ends, no walls)."""
+        return float(self.masses[0]) * self.initial_velocity
+
+    def with_observed(self, observed) -> "Chain":
+        """The same chain observing other granules (0-based indices)."""
+        return Chain(self.masses, self.stiffness, self.n, self.initial_velocity, observed, self.radii, self.kind, dict(self.meta))
+
+    def __repr__(self) -> str:
+        return (
+            f"Chain(kind={self.kind!r}, M={self.size}, n={self.n:g}, "
+            f"initial_velocity={self.initial_velocity:g}, observed={self.observed.size} granules)"
+        )
+
+
+def sphere_stiffness(radii: np.ndarray) -> np.ndarray:
+    """Contact prefactor of neighbouring spheres, r_k = sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})).
+
+    Paper Eq. (r-prime); radii in units of the reference radius.
+    """
+    r = np.asarray(radii, dtype=float)
+    return np.sqrt(2.0 * r[:-1] * r[1:] / (r[:-1] + r[1:]))  # Eq. (r-prime)
+
+
+def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observed=None, kind: str = "radii") -> Chain:
+    """A chain of spheres of one material from any list of radii.
+
+    m_k = R_k^3 (paper Sec. II: M_k = M_1 m_k with equal density), stiffness from
+    Eq. (r-prime). All granules are observed unless ``observed`` says otherwise.
+    """
+    r = positive_array("radii", radii, min_size=1)
+    if r.size < 2:
+        raise ValueError(f"a chain needs at least 2 granules, got {r.size} radius")
+    return Chain(r**3, sphere_stiffness(r), n, initial_velocity, observed, r, kind)
+
+
+def monodisperse(size: int, *, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+    """``size`` equal spheres of radius 1."""
+    size = count("size", size, minimum=2)
+    return from_radii(np.ones(size), n=n, initial_velocity=initial_velocity, kind="monodisperse")
+
+
+def tapered(size: int, q: float, *, profile: str = "geometric", n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+    """A tapered chain starting from radius 1.
+
+    ``profile="geometric"``: R_k = (1 - q)^(k-1); ``profile="linear"``:
+    R_k = 1 - q (k-1). q > 0 tapers down, q < 0 grows (an "inverted" taper).
+    """
+    size = count("size", size, minimum=2)
+    q = finite_scalar("q", q)
+    k = np.arange(size, dtype=float)
+    if profile == "geometric":
+        if not q < 1.0:
+            raise ValueError(f"q = {q!r} must be < 1 for a geometric taper R_k = (1 - q)^(k-1)")
+        radii = (1.0 - q) ** k
+    elif profile == "linear":
+        radii = 1.0 - q * k
+        if radii[-1] <= 0.0:
+            raise ValueError(
+                f"linear taper q = {q!r} makes radius {size} non-positive ({radii[-1]:.3g}); "
+                f"need q < {1.0 / (size - 1):.6g} for {size} granules"
+            )
+    else:
+        raise ValueError(f"profile must be 'geometric' or 'linear', got {profile!r}")
+    return from_radii(radii, n=n, initial_velocity=initial_velocity, kind=f"tapered-{profile}")
+
+
+def decorated(small_radii, *, large_radius: float = 1.0, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+    """N large equal granules with one small granule between each pair (paper Sec. III A).
+
+    ``small_radii`` (N-1 values, in units of the reference radius) sit between
+    large granules k and k+1. The chain has 2N-1 granules, both ends large, and
+    observes the large granules (0-based indices 0, 2, ..., 2N-2).
+    """
+    s = positive_array("small_radii", small_radii, min_size=1)
+    big = finite_scalar("large_radius", large_radius, positive=True)
+    radii = np.empty(2 * s.size + 1)
+    radii[0::2] = big
+    radii[1::2] = s
+    chain = from_radii(radii, n=n, initial_velocity=initial_velocity, observed=np.arange(0, radii.size, 2), kind="decorated")
+    chain.meta["small_radii"] = s
+    return chain
+
+
+def regular_decorated(size: int, pattern, *, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+    """A decorated chain of ``size`` large granules whose small radii repeat ``pattern``.
+
+    ``pattern=(0.3,)`` puts R = 0.3 in every gap; ``(0.2, 0.4)`` alternates.
+    """
+    size = count("size", size, minimum=2)
+    pat = positive_array("pattern", pattern, min_size=1)
+    chain = decorated(np.resize(pat, size - 1), n=n, initial_velocity=initial_velocity)
+    return chain

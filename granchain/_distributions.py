@@ -1,0 +1,191 @@
+"""Distributions of the small-granule radius (in units of the large radius).
+
+The paper draws the small radii uniformly on [alpha, beta] (Sec. IV, alpha =
+0.01, beta = 0.4) and notes that its results hold for any distribution on which
+the effective description is valid (Sec. V). Two classes cover this:
+
+* :class:`Uniform` - the paper's case, with closed forms where the theory has them;
+* :class:`Truncated` - any ``scipy.stats`` continuous distribution truncated to a
+  sub-interval of (0, 1), sampled by inverse transform.
+
+Both expose ``support``, ``pdf``, ``cdf``, ``ppf``, ``sample(rng, size)``,
+``expect(func)`` (quadrature over the support) and ``describe()`` (a JSON-able
+record for file attributes and run-parameter checks).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import integrate
+
+from ._validate import EFFECTIVE_VALIDITY_LIMIT, finite_scalar, warn_effective_validity
+
+__all__ = ["Uniform", "Truncated", "as_distribution"]
+
+
+class _Base:
+    support: tuple[float, float]
+
+    def expect(self, func) -> float:
+        """E[func(R)] by adaptive quadrature over the support."""
+        lo, hi = self.support
+        val, _ = integrate.quad(lambda r: func(r) * self.pdf(r), lo, hi, epsabs=0.0, epsrel=1e-12, limit=200)
+        return float(val)
+
+    def sample(self, rng: np.random.Generator, size) -> np.ndarray:
+        """Radii by inverse transform of ``rng.random(size)`` (one uniform per radius)."""
+        return self.ppf(rng.random(size))
+
+    def _check_validity(self) -> None:
+        lo, hi = self.support
+        if hi > EFFECTIVE_VALIDITY_LIMIT and float(self.cdf(EFFECTIVE_VALIDITY_LIMIT)) < 1.0:
+            warn_effective_validity(hi, what=f"the small-radius distribution {self.label()}", stacklevel=4)
+
+    def key(self) -> str:
+        """Canonical string of ``describe()``, for comparing run parameters."""
+        return json.dumps(self.describe(), sort_keys=True)
+
+
+@dataclass(frozen=True)
+class Uniform(_Base):
+    """Small radii uniform on [alpha, beta], 0 < alpha < beta <= 1 (paper Sec. IV)."""
+
+    alpha: float = 0.01
+    beta: float = 0.4
+
+    def __post_init__(self):
+        a = finite_scalar("alpha", self.alpha)
+        b = finite_scalar("beta", self.beta)
+        if a <= 0.0:
+            raise ValueError(f"alpha = {a!r} must be > 0 (a small granule needs a positive radius)")
+        if b > 1.0:
+            raise ValueError(f"beta = {b!r} must be <= 1 (small granules are no larger than the large ones)")
+        if a >= b:
+            raise ValueError(f"alpha = {a!r} must be < beta = {b!r}")
+        object.__setattr__(self, "alpha", a)
+        object.__setattr__(self, "beta", b)
+        self._check_validity()
+
+    @property
+    def support(self) -> tuple[float, float]:
+        return (self.alpha, self.beta)
+
+    def pdf(self, r):
+        r = np.asarray(r, dtype=float)
+        return np.where((r >= self.alpha) & (r <= self.beta), 1.0 / (self.beta - self.alpha), 0.0)
+
+    def cdf(self, r):
+        r = np.asarray(r, dtype=float)
+        return np.clip((r - self.alpha) / (self.beta - self.alpha), 0.0, 1.0)
+
+    def ppf(self, u):
+        return self.alpha + (self.beta - self.alpha) * np.asarray(u, dtype=float)
+
+    def label(self) -> str:
+        return f"U[{self.alpha:g}, {self.beta:g}]"
+
+    def describe(self) -> dict:
+        return {"name": "uniform", "alpha": self.alpha, "beta": self.beta}
+
+
+@dataclass(frozen=True, eq=False)
+class Truncated(_Base):
+    """A frozen ``scipy.stats`` continuous distribution truncated to [lower, upper].
+
+    ``lower``/``upper`` default to (0, 1) and must lie in [0, 1]; the distribution
+    must put positive probability on the interval. Example::
+
+        Truncated(scipy.stats.beta(2, 8), upper=0.4)
+        Truncated(scipy.stats.lognorm(0.5, scale=0.1))
+    """
+
+    dist: object
+    lower: float = 0.0
+    upper: float = 1.0
+    _mass: tuple = field(init=False, repr=False)
+
+    def __post_init__(self):
+        if not (hasattr(self.dist, "ppf") and hasattr(self.dist, "cdf") and hasattr(self.dist, "pdf")):
+            raise ValueError(
+                "dist must be a frozen scipy.stats continuous distribution, e.g. scipy.stats.beta(2, 8); "
+                f"got {self.dist!r}"
+            )
+        lo = finite_scalar("lower", self.lower)
+        hi = finite_scalar("upper", self.upper)
+        if not (0.0 <= lo < hi <= 1.0):
+            raise ValueError(f"need 0 <= lower < upper <= 1 for small radii, got lower = {lo!r}, upper = {hi!r}")
+        f_lo, f_hi = float(self.dist.cdf(lo)), float(self.dist.cdf(hi))
+        if not f_hi > f_lo:
+            raise ValueError(
+                f"{self._dist_name()} puts no probability on [{lo:g}, {hi:g}]: choose a distribution "
+                "with mass on the small-radius interval"
+            )
+        object.__setattr__(self, "lower", lo)
+        object.__setattr__(self, "upper", hi)
+        object.__setattr__(self, "_mass", (f_lo, f_hi))
+        # Effective support: where the truncated distribution actually has mass.
+        self._check_validity()
+
+    def _dist_name(self) -> str:
+        return getattr(getattr(self.dist, "dist", None), "name", type(self.dist).__name__)
+
+    @property
+    def support(self) -> tuple[float, float]:
+        d_lo, d_hi = (float(s) for s in self.dist.support())
+        return (max(self.lower, d_lo), min(self.upper, d_hi))
+
+    def pdf(self, r):
+        r = np.asarray(r, dtype=float)
+        f_lo, f_hi = self._mass
+        inside = (r >= self.lower) & (r <= self.upper)
+        return np.where(inside, self.dist.pdf(r) / (f_hi - f_lo), 0.0)
+
+    def cdf(self, r):
+        f_lo, f_hi = self._mass
+        r = np.clip(np.asarray(r, dtype=float), self.lower, self.upper)
+        return np.clip((self.dist.cdf(r) - f_lo) / (f_hi - f_lo), 0.0, 1.0)
+
+    def ppf(self, u):
+        f_lo, f_hi = self._mass
+        r = self.dist.ppf(f_lo + (f_hi - f_lo) * np.asarray(u, dtype=float))
+        # Guard the open ends against round-off and a radius of exactly zero.
+        lo, hi = self.support
+        return np.clip(r, np.nextafter(max(lo, 0.0), 1.0), hi)
+
+    def label(self) -> str:
+        return f"{self._dist_name()}{tuple(self.dist.args)} truncated to [{self.lower:g}, {self.upper:g}]"
+
+    def describe(self) -> dict:
+        kwds = {k: float(v) for k, v in getattr(self.dist, "kwds", {}).items()}
+        return {
+            "name": f"truncated {self._dist_name()}",
+            "args": [float(a) for a in getattr(self.dist, "args", ())],
+            "kwds": kwds,
+            "lower": self.lower,
+            "upper": self.upper,
+        }
+
+    def __eq__(self, other):
+        return isinstance(other, Truncated) and self.key() == other.key()
+
+    def __hash__(self):
+        return hash(self.key())
+
+
+def as_distribution(dist=None, *, alpha: float | None = None, beta: float | None = None):
+    """Normalise the ways a caller may name a small-radius distribution.
+
+    ``None`` gives the paper's U[0.01, 0.4] (or U[alpha, beta] if given); a
+    granchain distribution passes through; a frozen scipy.stats distribution is
+    truncated to (0, 1).
+    """
+    if dist is None:
+        return Uniform(0.01 if alpha is None else alpha, 0.4 if beta is None else beta)
+    if alpha is not None or beta is not None:
+        raise ValueError("give either dist or alpha/beta, not both")
+    if isinstance(dist, (Uniform, Truncated)):
+        return dist
+    return Truncated(dist)
