@@ -31,3 +31,8 @@ __all__ = [
     "sphere_stiffness",
     "tapered",
 ]
+
+from ._integrators import DOP853, DP5, INTEGRATORS, Verlet, get_integrator  # noqa: E402
+from ._simulate import PulseResult, Status, default_t_max, simulate  # noqa: E402
+
+__all__ += ["DOP853", "DP5", "INTEGRATORS", "PulseResult", "Status", "Verlet", "default_t_max", "get_integrator", "simulate"]

@@ -1,0 +1,169 @@
+"""Building blocks shared by the integrators: forces, energy, pulse bookkeeping.
+
+Equation of motion, paper Eq. (motion_rescaled):
+    m_k x_k'' = c_{k-1} (x_{k-1} - x_k)^(n-1) theta(x_{k-1} - x_k)
+              - c_k     (x_k - x_{k+1})^(n-1) theta(x_k - x_{k+1}).
+
+The "window" ``hi``: granules hi..M-1 are exactly at rest and uncompressed, so
+only granules 0..hi-1 are integrated. A Runge-Kutta step spreads motion by at
+most a few granules per step (one per two stages), so the window is kept
+``WINDOW_MARGIN`` granules ahead of the last moving one; with that margin the
+windowed integration is identical, bit for bit, to integrating all granules.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from ._jit import JIT
+
+# Status codes of one integration (mirrored by granchain.Status).
+SUCCESS = 0
+T_MAX = 1
+MAX_STEPS = 2
+STEP_UNDERFLOW = 3
+NONFINITE = 4
+
+# Fast paths for the contact power delta^(n-1).
+POW_GENERAL = 0
+POW_HERTZ = 1  # n = 5/2: delta * sqrt(delta)
+POW_LINEAR = 2  # n = 2: delta
+
+WINDOW_MARGIN = 5
+
+
+def power_code(n: float) -> int:
+    if n == 2.5:
+        return POW_HERTZ
+    if n == 2.0:
+        return POW_LINEAR
+    return POW_GENERAL
+
+
+@njit(**JIT)
+def contact_force(d, c, n, pw):
+    """c * d^(n-1) for d > 0, else 0 (Eq. motion_rescaled)."""
+    if d <= 0.0:
+        return 0.0
+    if pw == POW_HERTZ:
+        return c * d * math.sqrt(d)
+    if pw == POW_LINEAR:
+        return c * d
+    return c * d ** (n - 1.0)
+
+
+@njit(**JIT)
+def accelerations(x, c, inv_m, n, pw, hi, F, a):
+    """a_k for k < hi (Eq. motion_rescaled); F is scratch for the contact forces."""
+    M = x.shape[0]
+    nc = min(hi, M - 1)  # contacts 0..nc-1; contact hi-1 touches the resting granule hi
+    for j in range(nc):
+        F[j] = contact_force(x[j] - x[j + 1], c[j], n, pw)
+    left = 0.0
+    for k in range(hi):
+        right = F[k] if k < nc else 0.0
+        a[k] = (left - right) * inv_m[k]
+        left = right
+
+
+@njit(**JIT)
+def acceleration_of(x, k, c, inv_m, n, pw):
+    """The acceleration of granule k alone."""
+    M = x.shape[0]
+    left = contact_force(x[k - 1] - x[k], c[k - 1], n, pw) if k > 0 else 0.0
+    right = contact_force(x[k] - x[k + 1], c[k], n, pw) if k < M - 1 else 0.0
+    return (left - right) * inv_m[k]
+
+
+@njit(**JIT)
+def total_energy(x, v, m, c, n):
+    """Kinetic plus potential energy, sum m v^2/2 + sum (c/n) delta^n (Eq. hertz-1)."""
+    M = x.shape[0]
+    e = 0.0
+    for k in range(M):
+        e += 0.5 * m[k] * v[k] * v[k]
+    for j in range(M - 1):
+        d = x[j] - x[j + 1]
+        if d > 0.0:
+            e += c[j] / n * d**n
+    return e
+
+
+@njit(**JIT)
+def total_momentum(v, m):
+    p = 0.0
+    for k in range(v.shape[0]):
+        p += m[k] * v[k]
+    return p
+
+
+@njit(**JIT)
+def initial_window(x, v):
+    """Window end for a state given at t = 0: WINDOW_MARGIN past the last granule that moves."""
+    M = x.shape[0]
+    last = M - 1
+    while last > 0 and x[last] == 0.0 and v[last] == 0.0:
+        last -= 1
+    return min(M, last + 1 + WINDOW_MARGIN)
+
+
+@njit(**JIT)
+def advance_window(x, v, hi):
+    """New window end: WINDOW_MARGIN past the last granule that moved (never shrinks)."""
+    M = x.shape[0]
+    last = hi - 1
+    while last > 0 and x[last] == 0.0 and v[last] == 0.0:
+        last -= 1
+    return max(hi, min(M, last + 1 + WINDOW_MARGIN))
+
+
+@njit(**JIT)
+def pulse_has_left(x, v):
+    """The last contact is open and the last granule outruns every other granule.
+
+    A light granule flung ahead of the pulse can open the last contact early,
+    but then the last granule moves slowly and the pulse behind it is faster,
+    so the second condition keeps the integration going.
+    """
+    M = x.shape[0]
+    if x[M - 2] - x[M - 1] > 0.0:
+        return False
+    vl = v[M - 1]
+    if vl <= 0.0:
+        return False
+    for k in range(M - 1):
+        if v[k] >= vl:
+            return False
+    return True
+
+
+@njit(**JIT)
+def is_finite_window(x, v, hi):
+    for k in range(hi):
+        if not (math.isfinite(x[k]) and math.isfinite(v[k])):
+            return False
+    return True
+
+
+@njit(**JIT)
+def is_new_peak(candidate, current, peak_rtol):
+    """Does a local maximum ``candidate`` replace the recorded peak ``current``?
+
+    Candidates are the local maxima of v_k(t) (acceleration + to -), the
+    velocity at t = 0 and at the end. A later maximum wins only if it is higher
+    by more than ``peak_rtol`` (relative): maxima equal within the integration
+    error are a tie, and the earliest is kept, so that the peak time does not
+    jump between two humps (or to the plateau of a free end) on round-off.
+    """
+    return candidate > current + peak_rtol * abs(current)
+
+
+@njit(**JIT)
+def final_peaks(obs, v, t, peak_rtol, peak_v, peak_t):
+    """The velocity at the end of the run is a candidate too (a granule still speeding up)."""
+    for q in range(obs.shape[0]):
+        if is_new_peak(v[obs[q]], peak_v[q], peak_rtol):
+            peak_v[q] = v[obs[q]]
+            peak_t[q] = t

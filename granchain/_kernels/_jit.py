@@ -1,0 +1,18 @@
+"""The one place that holds the Numba compilation flags (all kernels use ``numba.njit``,
+so nopython mode is implied: a kernel that cannot compile fully is a bug, not a slow path)."""
+
+JIT = dict(
+    # Keep compiled machine code in __pycache__ so a second process (a Dask
+    # worker, the next test run) skips the ~seconds of LLVM compilation.
+    cache=True,
+    # No fastmath: results must be bitwise identical whatever the thread count,
+    # chunking or worker (reassociation would make them depend on inlining).
+    fastmath=False,
+    # NumPy semantics for float errors (inf/nan instead of exceptions); the
+    # kernels check finiteness themselves and report it as a status.
+    error_model="numpy",
+    boundscheck=False,
+)
+
+#: Same flags plus threading, for the ensemble loop (``numba.prange``).
+JIT_PARALLEL = dict(JIT, parallel=True)

@@ -1,0 +1,123 @@
+"""SciPy's DOP853 on the same problem: the independent reference integrator.
+
+Everything here is plain NumPy/SciPy, sharing no numerical code with the
+compiled kernels: the right-hand side of Eq. (motion_rescaled) is vectorised
+over the whole chain (no active window), steps are SciPy's DOP853 (order 8,
+its own error norm and controller), peaks are roots of the acceleration on
+SciPy's order-7 dense output found with ``scipy.optimize.brentq``. Only the
+stopping rule is the same, so both integrators stop at the same physical event.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate import DOP853 as _SciPyDOP853
+from scipy.optimize import brentq
+
+from ._kernels._common import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
+
+
+def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float):
+    """f(t, y) for y = (x, v), Eq. (motion_rescaled), vectorised with NumPy."""
+    M = masses.size
+
+    def forces(x):
+        d = x[:-1] - x[1:]
+        return np.where(d > 0.0, stiffness * np.abs(d) ** (n - 1.0), 0.0)
+
+    def rhs(t, y):
+        x, v = y[:M], y[M:]
+        F = forces(x)
+        a = np.zeros(M)
+        a[1:] += F
+        a[:-1] -= F
+        return np.concatenate((v, a / masses))
+
+    return rhs, forces
+
+
+def _first_nonpositive(f, t0, t1):
+    """First time in [t0, t1] where f (positive at t0) reaches <= 0.
+
+    brentq for a sign change; bisection when f(t1) is exactly zero (an opened
+    contact: the acceleration is zero on an interval and its start is wanted).
+    """
+    if f(t1) < 0.0:
+        return brentq(f, t0, t1, xtol=1e-15, rtol=1e-15)
+    for _ in range(200):
+        tm = 0.5 * (t0 + t1)
+        if f(tm) > 0.0:
+            t0 = tm
+        else:
+            t1 = tm
+        if t1 - t0 < 1e-14 * max(1.0, abs(t1)):
+            break
+    return t1
+
+
+def _pulse_has_left(x, v) -> bool:
+    if x[-2] - x[-1] > 0.0:
+        return False
+    return v[-1] > 0.0 and bool(np.all(v[:-1] < v[-1]))
+
+
+def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid):
+    """Same contract as the compiled kernels; returns (status, info, peak_v, peak_t, grid_v, x, v)."""
+    M = masses.size
+    rhs, _ = chain_rhs(masses, stiffness, n)
+    y0 = np.concatenate((x0, v0))
+    solver = _SciPyDOP853(rhs, 0.0, y0, t_bound=t_max, rtol=rtol, atol=atol)
+    accel = lambda y: rhs(0.0, y)[M:]  # noqa: E731
+    peak_v = v0[obs].astype(float)
+    peak_t = np.zeros(obs.size)
+    grid_v = np.zeros((obs.size, t_grid.size))
+    g = int(np.searchsorted(t_grid, 0.0, side="right"))
+    grid_v[:, :g] = v0[obs][:, None]
+    t_needed = t_grid[-1] if t_grid.size else 0.0
+    a_old = accel(y0)
+    exit_since = -1.0
+    n_steps = 0
+    status = None
+    while status is None:
+        if n_steps >= max_steps:
+            status = MAX_STEPS
+            break
+        message = solver.step()
+        if solver.status == "failed":
+            status = STEP_UNDERFLOW if "step size" in str(message) else NONFINITE
+            break
+        n_steps += 1
+        y = solver.y
+        if not np.all(np.isfinite(y)):
+            status = NONFINITE
+            break
+        a_new = accel(y)
+        dense = solver.dense_output()
+        t0, t1 = solver.t_old, solver.t
+        for q, k in enumerate(obs):
+            if a_old[k] > 0.0 and a_new[k] <= 0.0:
+                tp = _first_nonpositive(lambda s: accel(dense(s))[k], t0, t1)
+                vp = dense(tp)[M + k]
+                if vp > peak_v[q] + peak_rtol * abs(peak_v[q]):  # same tie rule as the kernels
+                    peak_v[q], peak_t[q] = vp, tp
+        g_end = int(np.searchsorted(t_grid, t1, side="right"))
+        if g_end > g:
+            grid_v[:, g:g_end] = dense(t_grid[g:g_end])[M + obs]
+            g = g_end
+        a_old = a_new
+        if stop_at_exit:
+            if _pulse_has_left(y[:M], y[M:]):
+                if exit_since < 0.0:
+                    exit_since = t1
+                if t1 - exit_since >= exit_margin and t1 >= t_needed:
+                    status = SUCCESS
+                    break
+            else:
+                exit_since = -1.0
+        if solver.status == "finished":
+            status = T_MAX if stop_at_exit else SUCCESS
+    for q, k in enumerate(obs):
+        if solver.y[M + k] > peak_v[q] + peak_rtol * abs(peak_v[q]):
+            peak_v[q], peak_t[q] = solver.y[M + k], solver.t
+    info = np.array([solver.t, n_steps, 0.0, exit_since, solver.nfev], dtype=float)
+    return status, info, peak_v, peak_t, grid_v, solver.y[:M].copy(), solver.y[M:].copy()
