@@ -35,10 +35,12 @@ class DP5:
     """Compiled adaptive Dormand-Prince 5(4), PI step control, max-norm error (the default).
 
     ``fixed_step`` switches step control off (used to measure the order).
+    The defaults keep peak velocities and times within ~1e-7 (relative) of
+    DOP853 at rtol 1e-10 on random decorated chains and their effective chains.
     """
 
-    rtol: float = 1e-9
-    atol: float = 1e-12
+    rtol: float = 1e-8
+    atol: float = 1e-10
     first_step: float = 1e-3
     fixed_step: float | None = None
 

@@ -55,10 +55,12 @@ def _first_nonpositive(f, t0, t1):
     return t1
 
 
-def _pulse_has_left(x, v) -> bool:
+def _pulse_has_left(x, v, obs) -> bool:
+    """Same rule as granchain._kernels._common.pulse_has_left."""
     if x[-2] - x[-1] > 0.0:
         return False
-    return v[-1] > 0.0 and bool(np.all(v[:-1] < v[-1]))
+    others = obs[obs < x.size - 1]
+    return v[-1] > 0.0 and v[-2] < v[-1] and bool(np.all(v[others] < v[-1]))
 
 
 def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid):
@@ -106,7 +108,7 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
             g = g_end
         a_old = a_new
         if stop_at_exit:
-            if _pulse_has_left(y[:M], y[M:]):
+            if _pulse_has_left(y[:M], y[M:], obs):
                 if exit_since < 0.0:
                     exit_since = t1
                 if t1 - exit_since >= exit_margin and t1 >= t_needed:

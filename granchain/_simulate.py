@@ -118,7 +118,7 @@ def default_t_max(chain: Chain) -> float:
     return 100.0 + 20.0 * chain.size / max(chain.initial_velocity, 1e-3) ** (1.0 - 2.0 / max(chain.n, 2.0))
 
 
-def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None = None, stop: str = "exit", exit_margin: float = 3.0, max_steps: int = 20_000_000, peak_rtol: float = 1e-7) -> PulseResult:
+def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None = None, stop: str = "exit", exit_margin: float = 3.0, max_steps: int = 20_000_000, peak_rtol: float = 1e-6) -> PulseResult:
     """Integrate Eq. (motion_rescaled) for one chain struck at granule 1.
 
     Parameters

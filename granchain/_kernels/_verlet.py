@@ -113,7 +113,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             accelerations(x, c, inv_m, n, pw, hi, F, a)
             n_eval += 1
         if stop_at_exit:
-            if hi == M and pulse_has_left(x, v):
+            if hi == M and pulse_has_left(x, v, obs):
                 if exit_since < 0.0:
                     exit_since = t
                 if t - exit_since >= exit_margin and t >= t_needed:
