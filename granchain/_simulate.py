@@ -31,7 +31,7 @@ class Status(enum.IntEnum):
 
 
 _MESSAGES = {
-    Status.SUCCESS: "the pulse left the last granule (or t_max was reached when stopping at t_max)",
+    Status.SUCCESS: "finished: the pulse left the last granule (stop='exit') or t_max was reached (stop='t_max')",
     Status.T_MAX: "t_max was reached before the pulse left the last granule: raise t_max",
     Status.MAX_STEPS: "the step budget (max_steps) ran out: raise max_steps or loosen rtol",
     Status.STEP_UNDERFLOW: "the step size underflowed: the chain is too stiff for these tolerances",

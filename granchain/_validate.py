@@ -62,11 +62,11 @@ def positive_array(name: str, values, *, min_size: int = 1) -> np.ndarray:
     bad = ~np.isfinite(a)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"{name} must be finite: entry {i} is {a[i]!r}")
+        raise ValueError(f"{name} must be finite: entry {i} is {float(a[i])!r}")
     bad = a <= 0.0
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"{name} must be > 0: entry {i} is {a[i]!r}")
+        raise ValueError(f"{name} must be > 0: entry {i} is {float(a[i])!r}")
     return a
 
 
