@@ -36,3 +36,6 @@ from ._integrators import DOP853, DP5, INTEGRATORS, Verlet, get_integrator  # no
 from ._simulate import PulseResult, Status, default_t_max, simulate  # noqa: E402
 
 __all__ += ["DOP853", "DP5", "INTEGRATORS", "PulseResult", "Status", "Verlet", "default_t_max", "get_integrator", "simulate"]
+from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, EnsembleSpec, default_time_grid, run_ensemble  # noqa: E402
+
+__all__ += ["ENSEMBLE_ATOL", "ENSEMBLE_RTOL", "EnsembleSpec", "default_time_grid", "run_ensemble"]
