@@ -1,0 +1,62 @@
+"""Paper Fig. 1: averaged velocity profile <v_k(t)> of the large granules, N = 11,
+decorated chain with its effective chain overlaid (black continuous curves)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._style import COLORS, TIME_LABEL, VELOCITY_UNITS, axes
+
+
+@dataclass(frozen=True, eq=False)
+class Fig1Data:
+    time: np.ndarray
+    granule: np.ndarray
+    decorated: np.ndarray  # (granule, time)
+    effective: np.ndarray | None
+    realizations: int
+
+    def to_dataset(self):
+        import xarray as xr
+
+        ds = xr.Dataset(coords={"granule": self.granule, "time": ("time", self.time, {"units": "rescaled time"})},
+                        attrs={"figure": "paper Fig. 1", "realizations": self.realizations})
+        ds["decorated"] = (("granule", "time"), self.decorated, {"long_name": "<v_k(t)>, decorated chain", "units": "V_1"})
+        if self.effective is not None:
+            ds["effective"] = (("granule", "time"), self.effective, {"long_name": "<v_k(t)>, effective chain", "units": "V_1"})
+        return ds
+
+
+def compute(ds, granules=None) -> Fig1Data:
+    """<v_k(t)> of the granules (default: all) from an ensemble Dataset (``run_ensemble``)."""
+    sel = ds if granules is None else ds.sel(granule=list(granules))
+    mv = sel["mean_velocity"].transpose("chain", "granule", "time")
+    chains = list(sel["chain"].values)
+    if "decorated" not in chains:
+        raise ValueError("Fig. 1 needs the decorated chain in the Dataset (run_ensemble(..., chains='both'))")
+    eff = mv.sel(chain="effective").values if "effective" in chains else None
+    return Fig1Data(sel["time"].values, sel["granule"].values, mv.sel(chain="decorated").values, eff, int(ds.sizes["realization"]))
+
+
+def plot(data: Fig1Data, ax=None):
+    fig, ax = axes(ax, figsize=(7.0, 4.4))
+    cmap = __import__("matplotlib").colormaps["viridis"]
+    K = len(data.granule)
+    for i, k in enumerate(data.granule):
+        ax.plot(data.time, data.decorated[i], color=cmap(i / max(K - 1, 1)), lw=1.6,
+                label="decorated chain" if i == 0 else None)
+        if data.effective is not None:
+            ax.plot(data.time, data.effective[i], color=COLORS["effective"], lw=0.8, ls="-",
+                    label="effective chain" if i == 0 else None)
+        j = int(np.nanargmax(data.decorated[i]))
+        if K <= 30:
+            ax.annotate(f"{k}", (data.time[j], data.decorated[i, j]), textcoords="offset points", xytext=(0, 3),
+                        ha="center", fontsize=7)
+    ax.set_xlabel(TIME_LABEL)
+    ax.set_ylabel(r"averaged velocity $\langle v_k(t)\rangle$ " + VELOCITY_UNITS)
+    ax.set_title(f"Averaged velocity of the large granules, N = {K} ({data.realizations} realisations)", fontsize=10)
+    ax.set_xlim(data.time[0], data.time[-1])
+    ax.legend(loc="upper right", frameon=False)
+    return fig
