@@ -27,7 +27,7 @@ PAPER = {
     "slope": 2.402, "intercept": -1.181, "S": 2.348,
 }
 CITATION = ("U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg, "
-            "\"Pulse propagation in decorated random chains\" (Phys. Rev. E).")
+            "\"Pulse propagation in decorated random chains\".")
 
 
 @dataclass(frozen=True)
