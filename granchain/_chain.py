@@ -28,6 +28,7 @@ __all__ = [
     "tapered",
     "decorated",
     "regular_decorated",
+    "sphere_mass",
     "sphere_stiffness",
 ]
 
@@ -131,13 +132,20 @@ class Chain:
         )
 
 
+def sphere_mass(radii: np.ndarray) -> np.ndarray:
+    """m = R^3 (equal density, paper Sec. II), written as a product so that arrays of any
+    shape (one chain or a batch of chains) give bitwise the same masses."""
+    r = np.asarray(radii, dtype=float)
+    return r * r * r
+
+
 def sphere_stiffness(radii: np.ndarray) -> np.ndarray:
     """Contact prefactor of neighbouring spheres, r_k = sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})).
 
-    Paper Eq. (r-prime); radii in units of the reference radius.
+    Paper Eq. (r-prime); radii in units of the reference radius, along the last axis.
     """
     r = np.asarray(radii, dtype=float)
-    return np.sqrt(2.0 * r[:-1] * r[1:] / (r[:-1] + r[1:]))  # Eq. (r-prime)
+    return np.sqrt(2.0 * r[..., :-1] * r[..., 1:] / (r[..., :-1] + r[..., 1:]))  # Eq. (r-prime)
 
 
 def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observed=None, kind: str = "radii") -> Chain:
@@ -149,7 +157,7 @@ def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observ
     r = positive_array("radii", radii, min_size=1)
     if r.size < 2:
         raise ValueError(f"a chain needs at least 2 granules, got {r.size} radius")
-    return Chain(r**3, sphere_stiffness(r), n, initial_velocity, observed, r, kind)
+    return Chain(sphere_mass(r), sphere_stiffness(r), n, initial_velocity, observed, r, kind)
 
 
 def monodisperse(size: int, *, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:

@@ -42,7 +42,7 @@ class _Base:
     def _check_validity(self) -> None:
         lo, hi = self.support
         if hi > EFFECTIVE_VALIDITY_LIMIT and float(self.cdf(EFFECTIVE_VALIDITY_LIMIT)) < 1.0:
-            warn_effective_validity(hi, what=f"the small-radius distribution {self.label()}", stacklevel=4)
+            warn_effective_validity(hi, what=f"the small-radius distribution {self.label()}", stacklevel=5)  # caller -> __init__ -> __post_init__ -> here
 
     def key(self) -> str:
         """Canonical string of ``describe()``, for comparing run parameters."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._chain import Chain, sphere_stiffness
+from ._chain import Chain, sphere_mass, sphere_stiffness
 from ._validate import warn_effective_validity
 
 __all__ = ["effective", "effective_parameters"]
@@ -27,19 +27,25 @@ def effective_parameters(large_radii: np.ndarray, small_radii: np.ndarray, n: fl
     c / 2^(n-1) with c = r_k = sqrt(2 R_k / (1 + R_k)), Eq. (zetak), exactly the
     paper's V_eff = r_k / (n 2^(n-1)) delta^n. The general form also serves
     decorated chains whose large granules differ (e.g. tapered).
+
+    Works along the last axis (one chain, or a batch of chains with the same N), with
+    bitwise the same values either way.
     """
     big = np.asarray(large_radii, dtype=float)
     s = np.asarray(small_radii, dtype=float)
-    small_mass = s**3
-    mu = big**3  # Eq. (renorm-mass)
-    mu[:-1] += 0.5 * small_mass
-    mu[1:] += 0.5 * small_mass
-    radii = np.empty(2 * s.size + 1)
-    radii[0::2] = big
-    radii[1::2] = s
+    small_mass = sphere_mass(s)
+    mu = sphere_mass(big)  # Eq. (renorm-mass)
+    mu[..., :-1] += 0.5 * small_mass
+    mu[..., 1:] += 0.5 * small_mass
+    radii = np.empty(s.shape[:-1] + (2 * s.shape[-1] + 1,))
+    radii[..., 0::2] = big
+    radii[..., 1::2] = s
     c = sphere_stiffness(radii)  # Eq. (r-prime) on each side of every small granule
+    cl, cr = c[..., 0::2], c[..., 1::2]
     p = 1.0 / (n - 1.0)
-    c_eff = (c[0::2] ** -p + c[1::2] ** -p) ** -(n - 1.0)  # Eq. (effec-int), series contacts
+    with np.errstate(all="ignore"):
+        series = (cl**-p + cr**-p) ** -(n - 1.0)  # two contacts in series
+    c_eff = np.where(cl == cr, cl * 2.0 ** -(n - 1.0), series)  # Eq. (effec-int): r_k / 2^(n-1)
     return mu, c_eff
 
 

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import __version__
-from ._chain import HERTZ, Chain, decorated
+from ._chain import HERTZ, Chain, sphere_mass, sphere_stiffness
 from ._distributions import as_distribution
-from ._effective import effective
+from ._effective import effective_parameters
 from ._integrators import DP5
 from ._kernels._common import power_code
 from ._kernels._ensemble import dp5_ensemble
@@ -146,19 +146,20 @@ class EnsembleSpec:
 
 # --------------------------------------------------------------------------- compute
 def _chain_arrays(spec: EnsembleSpec, kind: str, small: np.ndarray):
-    """Masses, stiffnesses (R, M), initial velocity and observed indices, built row by row
-    with the same functions ``simulate`` users call, so results match bit for bit."""
-    rows_m, rows_c = [], []
-    chain = None
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for radii in small:
-            chain = decorated(radii, n=spec.n)
-            if kind == "effective":
-                chain = effective(chain, momentum_conserving=spec.momentum_conserving)
-            rows_m.append(chain.masses)
-            rows_c.append(chain.stiffness)
-    return np.array(rows_m), np.array(rows_c), chain.initial_velocity, chain.observed
+    """Masses, stiffnesses (R, M), initial velocities (R,) and observed indices of a batch.
+
+    The same functions ``decorated``/``effective`` use, applied along the last axis, so
+    each row is bitwise the chain ``simulate`` users build for that realisation.
+    """
+    R, G = small.shape
+    if kind == "decorated":
+        radii = np.ones((R, 2 * G + 1))
+        radii[:, 1::2] = small
+        v0 = np.ones(R)
+        return sphere_mass(radii), sphere_stiffness(radii), v0, np.arange(0, 2 * G + 1, 2)
+    mu, c_eff = effective_parameters(np.ones((R, G + 1)), small, spec.n)
+    v0 = 1.0 / mu[:, 0] if spec.momentum_conserving else np.ones(R)  # m_1 v_1 / mu_1 with m_1 = v_1 = 1
+    return mu, c_eff, v0, np.arange(G + 1)
 
 
 def _probe_chain(m, c, n, v0) -> Chain:
@@ -188,20 +189,22 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None) -> dic
         "energy_error": np.zeros((nc, R)),
         "n_steps": np.zeros((nc, R), dtype=np.int64),
         "t_end": np.zeros((nc, R)),
-        "sum_v": np.zeros((nc, N, T), dtype=np.int64),
-        "sum_v2": np.zeros((nc, N, T), dtype=np.int64),
+        "sum_v": np.zeros((nc, T, N), dtype=np.int64),  # time-major in the kernel
+        "sum_v2": np.zeros((nc, T, N), dtype=np.int64),
         "n_valid": np.zeros((nc, 1), dtype=np.int64),
     }
     scale = float(2.0**spec.fixed_point_bits)
     for ci, kind in enumerate(spec.chains):
         masses, stiffness, v0, obs = _chain_arrays(spec, kind, small)
-        t_max = max(default_t_max(_probe_chain(masses[0], stiffness[0], spec.n, v0)), float(spec.t_grid[-1]))
+        t_max = max(default_t_max(_probe_chain(masses[0], stiffness[0], spec.n, float(v0.min()))), float(spec.t_grid[-1]))
         dp5_ensemble(
             masses, stiffness, spec.n, power_code(spec.n), v0, obs, spec.rtol, spec.atol, 1e-3, t_max,
             spec.exit_margin, spec.max_steps, spec.peak_rtol, spec.t_grid, scale, numba.get_num_threads(),
             out["peak_velocity"][ci], out["peak_time"][ci], out["status"][ci], out["energy_error"][ci],
             out["n_steps"][ci], out["t_end"][ci], out["sum_v"][ci], out["sum_v2"][ci], out["n_valid"][ci],
         )
+    out["sum_v"] = np.ascontiguousarray(out["sum_v"].transpose(0, 2, 1))  # (chain, granule, time)
+    out["sum_v2"] = np.ascontiguousarray(out["sum_v2"].transpose(0, 2, 1))
     return out
 
 

@@ -114,7 +114,7 @@ class DOP853:
 
 def _outputs(chain, t_grid):
     k = chain.observed.size
-    return np.zeros(k), np.zeros(k), np.zeros((k, t_grid.size)), np.zeros(5)
+    return np.zeros(k), np.zeros(k), np.zeros((t_grid.size, k)), np.zeros(5)  # velocities time-major
 
 
 #: Registered integrators by name (the CLI's ``--integrator`` choices).

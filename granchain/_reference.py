@@ -72,9 +72,9 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     accel = lambda y: rhs(0.0, y)[M:]  # noqa: E731
     peak_v = v0[obs].astype(float)
     peak_t = np.zeros(obs.size)
-    grid_v = np.zeros((obs.size, t_grid.size))
+    grid_v = np.zeros((t_grid.size, obs.size))  # time-major, as the kernels
     g = int(np.searchsorted(t_grid, 0.0, side="right"))
-    grid_v[:, :g] = v0[obs][:, None]
+    grid_v[:g] = v0[obs]
     t_needed = t_grid[-1] if t_grid.size else 0.0
     a_old = accel(y0)
     exit_since = -1.0
@@ -104,7 +104,7 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
                     peak_v[q], peak_t[q] = vp, tp
         g_end = int(np.searchsorted(t_grid, t1, side="right"))
         if g_end > g:
-            grid_v[:, g:g_end] = dense(t_grid[g:g_end])[M + obs]
+            grid_v[g:g_end] = dense(t_grid[g:g_end])[M + obs].T
             g = g_end
         a_old = a_new
         if stop_at_exit:

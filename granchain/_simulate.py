@@ -186,7 +186,7 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         n_rejected=int(info[2]),
         n_evaluations=int(info[4]),
         t_grid=grid if grid.size else None,
-        velocity=grid_v if grid.size else None,
+        velocity=np.ascontiguousarray(grid_v.T) if grid.size else None,
         positions=x,
         velocities=v,
     )

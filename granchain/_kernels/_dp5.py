@@ -215,7 +215,8 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     For each observed granule q (0-based index obs[q]) the kernel writes the
     maximum velocity ``peak_v[q]`` and its time ``peak_t[q]`` (see
     ``granchain._kernels._common.is_new_peak`` for ties), and the velocity
-    at each time of ``t_grid`` into ``grid_v[q, :]``. ``h_fixed > 0`` turns
+    at each time t_grid[g] into ``grid_v[g, q]`` (time-major: one
+    contiguous row per grid time). ``h_fixed > 0`` turns
     step control off (fixed steps of h_fixed). With ``stop_at_exit`` the run
     ends ``exit_margin`` after the pulse has left the last granule (and not
     before t_grid[-1]); otherwise at ``t_max``.
@@ -248,7 +249,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     g = 0
     while g < n_grid and t_grid[g] <= 0.0:
         for q in range(n_obs):
-            grid_v[q, g] = v[obs[q]]
+            grid_v[g, q] = v[obs[q]]
         g += 1
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
 
@@ -303,7 +304,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
             dense_weights((t_grid[g] - t) / h, Q)
             for q in range(n_obs):
                 k = obs[q]
-                grid_v[q, g] = dense_value(v[k], Kv, k, h, Q) if k < hi else 0.0
+                grid_v[g, q] = dense_value(v[k], Kv, k, h, Q) if k < hi else 0.0
             g += 1
 
         for i in range(hi):

@@ -25,20 +25,20 @@ from ._jit import JIT_PARALLEL
 @njit(**JIT_PARALLEL)
 def dp5_ensemble(masses, stiffness, n, pw, v_init, obs, rtol, atol, h_init, t_max, exit_margin, max_steps, peak_rtol, t_grid, scale, n_threads,
                  peak_v, peak_t, status, energy_error, n_steps, t_end, sum_v, sum_v2, n_valid):
-    """Integrate realisations r = 0..R-1 (rows of ``masses``/``stiffness``, shared ``obs``).
+    """Integrate realisations r = 0..R-1 (rows of ``masses``/``stiffness``/``v_init``, shared ``obs``).
 
     Per realisation writes peak_v[r, :], peak_t[r, :], status[r],
     energy_error[r] ((E_end - E_0)/E_0), n_steps[r], t_end[r]. Adds
     round(v * scale) and round(v^2 * scale) of every successful realisation's
-    observed velocities on ``t_grid`` into sum_v / sum_v2 (int64, (K, T)) and
+    observed velocities on ``t_grid`` into sum_v / sum_v2 (int64, (T, K)) and
     counts them in n_valid[0]. ``n_threads`` must be numba.get_num_threads()
     (passed in: calling it here would stop Numba from caching the kernel).
     """
     R, M = masses.shape
     K = obs.shape[0]
     T = t_grid.shape[0]
-    acc1 = np.zeros((n_threads, K, T), dtype=np.int64)
-    acc2 = np.zeros((n_threads, K, T), dtype=np.int64)
+    acc1 = np.zeros((n_threads, T, K), dtype=np.int64)
+    acc2 = np.zeros((n_threads, T, K), dtype=np.int64)
     cnt = np.zeros(n_threads, dtype=np.int64)
     for r in prange(R):
         tid = numba.get_thread_id()
@@ -46,27 +46,28 @@ def dp5_ensemble(masses, stiffness, n, pw, v_init, obs, rtol, atol, h_init, t_ma
         c = stiffness[r]
         x = np.zeros(M)
         v = np.zeros(M)
-        v[0] = v_init
-        grid_v = np.zeros((K, T))
+        v[0] = v_init[r]
+        grid_v = np.zeros((T, K))
         info = np.zeros(5)
         st = dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, 0.0, t_max, True, exit_margin, max_steps, peak_rtol,
                            t_grid, x, v, peak_v[r], peak_t[r], grid_v, info)
         status[r] = st
         n_steps[r] = np.int64(info[1])
         t_end[r] = info[0]
-        e0 = 0.5 * m[0] * v_init * v_init  # the same expression as Chain.energy
+        e0 = 0.5 * m[0] * v_init[r] * v_init[r]  # the same expression as Chain.energy
         e1 = total_energy(x, v, m, c, n)
         energy_error[r] = (e1 - e0) / e0
         if st == SUCCESS:
             cnt[tid] += 1
-            for q in range(K):
-                for g in range(T):
-                    w = grid_v[q, g]
-                    acc1[tid, q, g] += np.int64(np.rint(w * scale))
-                    acc2[tid, q, g] += np.int64(np.rint(w * w * scale))
+            for g in range(T):
+                for q in range(K):
+                    w = grid_v[g, q]
+                    if w != 0.0:  # granules the pulse has not reached are exactly at rest
+                        acc1[tid, g, q] += np.int64(np.rint(w * scale))
+                        acc2[tid, g, q] += np.int64(np.rint(w * w * scale))
     for th in range(n_threads):
         n_valid[0] += cnt[th]
-        for q in range(K):
-            for g in range(T):
-                sum_v[q, g] += acc1[th, q, g]
-                sum_v2[q, g] += acc2[th, q, g]
+        for g in range(T):
+            for q in range(K):
+                sum_v[g, q] += acc1[th, g, q]
+                sum_v2[g, q] += acc2[th, g, q]

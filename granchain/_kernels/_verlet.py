@@ -62,7 +62,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
     g = 0
     while g < n_grid and t_grid[g] <= 0.0:
         for q in range(n_obs):
-            grid_v[q, g] = v[obs[q]]
+            grid_v[g, q] = v[obs[q]]
         g += 1
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
     exit_since = -1.0
@@ -98,7 +98,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             theta = (t_grid[g] - t) / dt
             for q in range(n_obs):
                 k = obs[q]
-                grid_v[q, g] = hermite_velocity(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
+                grid_v[g, q] = hermite_velocity(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
             g += 1
         for i in range(hi):
             a[i] = a_new[i]
