@@ -52,7 +52,7 @@ ENSEMBLE_RTOL = 1e-6
 ENSEMBLE_ATOL = 1e-9
 
 
-def default_time_grid(n_large: int, dt: float = 0.05) -> np.ndarray:
+def default_time_grid(n_large: int, dt: float = 0.1) -> np.ndarray:
     """Grid for <v_k(t)>: to 1.1 x the BCA arrival time at granule N (slope 2.35 per granule) + 10."""
     t_end = 1.1 * 2.35 * (n_large - 1) + 10.0
     return np.round(np.arange(0.0, t_end + 0.5 * dt, dt), 12)

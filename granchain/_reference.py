@@ -14,7 +14,7 @@ import numpy as np
 from scipy.integrate import DOP853 as _SciPyDOP853
 from scipy.optimize import brentq
 
-from ._kernels._common import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
+from ._kernels._common import MAX_STEPS, NONFINITE, RATTLER_MASS_RATIO, STEP_UNDERFLOW, SUCCESS, T_MAX
 
 
 def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float):
@@ -55,12 +55,12 @@ def _first_nonpositive(f, t0, t1):
     return t1
 
 
-def _pulse_has_left(x, v, obs) -> bool:
+def _pulse_has_left(x, v, m) -> bool:
     """Same rule as granchain._kernels._common.pulse_has_left."""
     if x[-2] - x[-1] > 0.0:
         return False
-    others = obs[obs < x.size - 1]
-    return v[-1] > 0.0 and v[-2] < v[-1] and bool(np.all(v[others] < v[-1]))
+    heavy = m[:-1] >= RATTLER_MASS_RATIO * m[-1]
+    return v[-1] > 0.0 and v[-2] < v[-1] and bool(np.all(v[:-1][heavy] < v[-1]))
 
 
 def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid):
@@ -108,18 +108,24 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
             g = g_end
         a_old = a_new
         if stop_at_exit:
-            if _pulse_has_left(y[:M], y[M:], obs):
+            if _pulse_has_left(y[:M], y[M:], masses):
                 if exit_since < 0.0:
                     exit_since = t1
-                if t1 - exit_since >= exit_margin and t1 >= t_needed:
+                if t1 >= max(exit_since + exit_margin, t_needed):
                     status = SUCCESS
                     break
+                solver.t_bound = min(t_max, max(exit_since + exit_margin, t_needed))  # land on the stop time
             else:
                 exit_since = -1.0
+                solver.t_bound = t_max
         if solver.status == "finished":
-            status = T_MAX if stop_at_exit else SUCCESS
+            if solver.t < t_max:  # reached a provisional exit stop whose condition no longer holds
+                solver.status = "running"
+            else:
+                status = T_MAX if stop_at_exit else SUCCESS
+    a_end = accel(solver.y)
     for q, k in enumerate(obs):
-        if solver.y[M + k] > peak_v[q] + peak_rtol * abs(peak_v[q]):
+        if a_end[k] > 0.0 and solver.y[M + k] > peak_v[q] + peak_rtol * abs(peak_v[q]):  # as final_peaks
             peak_v[q], peak_t[q] = solver.y[M + k], solver.t
     info = np.array([solver.t, n_steps, 0.0, exit_since, solver.nfev], dtype=float)
     return status, info, peak_v, peak_t, grid_v, solver.y[:M].copy(), solver.y[M:].copy()

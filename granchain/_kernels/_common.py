@@ -124,17 +124,23 @@ def advance_window(x, v, hi):
     return max(hi, min(M, last + 1 + WINDOW_MARGIN))
 
 
+#: Granules lighter than this fraction of the last granule's mass are "rattlers":
+#: they do not hold the exit of the pulse (see pulse_has_left).
+RATTLER_MASS_RATIO = 0.1
+
+
 @njit(**JIT)
-def pulse_has_left(x, v, obs):
+def pulse_has_left(x, v, m):
     """The pulse has left the chain through its last granule.
 
     Conditions: the last contact is open, the last granule moves away from its
-    neighbour (v_M > v_{M-1}) and outruns every observed granule (the pulse
-    carriers: all granules of a plain chain, the large ones of a decorated
-    chain). A light granule flung ahead of the pulse can open the last contact
-    early, but then the last granule is slow and the pulse behind it is faster,
-    so the integration goes on. Small granules rattling behind the pulse are
-    not the pulse and do not hold the run.
+    neighbour (v_M > v_{M-1}) and outruns every granule at least
+    RATTLER_MASS_RATIO as heavy as itself (all granules of a plain chain, the
+    large ones of a decorated chain). A light granule flung ahead of the pulse
+    can open the last contact early, but then the last granule is slow and the
+    pulse behind it is faster, so the integration goes on. Light granules
+    rattling between heavy ones behind the pulse are not the pulse and do not
+    hold the run.
     """
     M = x.shape[0]
     if x[M - 2] - x[M - 1] > 0.0:
@@ -142,11 +148,19 @@ def pulse_has_left(x, v, obs):
     vl = v[M - 1]
     if vl <= 0.0 or v[M - 2] >= vl:
         return False
-    for q in range(obs.shape[0]):
-        k = obs[q]
-        if k < M - 1 and v[k] >= vl:
+    m_min = RATTLER_MASS_RATIO * m[M - 1]
+    for k in range(M - 1):
+        if v[k] >= vl and m[k] >= m_min:
             return False
     return True
+
+
+@njit(**JIT)
+def stop_time(t_max, exit_since, exit_margin, t_needed):
+    """Where the run must end: exit_margin after the exit (not before t_needed), at most t_max."""
+    if exit_since < 0.0:
+        return t_max
+    return min(t_max, max(exit_since + exit_margin, t_needed))
 
 
 @njit(**JIT)
@@ -171,9 +185,12 @@ def is_new_peak(candidate, current, peak_rtol):
 
 
 @njit(**JIT)
-def final_peaks(obs, v, t, peak_rtol, peak_v, peak_t):
-    """The velocity at the end of the run is a candidate too (a granule still speeding up)."""
+def final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t):
+    """The velocity at the end of the run is a candidate if the granule is still speeding up
+    (a > 0). A granule in free flight (a = 0) had its maximum located where its contact
+    opened; its end velocity carries the error of the step across that kink of the force,
+    so it must not displace the located maximum."""
     for q in range(obs.shape[0]):
-        if is_new_peak(v[obs[q]], peak_v[q], peak_rtol):
+        if a[obs[q]] > 0.0 and is_new_peak(v[obs[q]], peak_v[q], peak_rtol):
             peak_v[q] = v[obs[q]]
             peak_t[q] = t

@@ -35,6 +35,7 @@ from ._common import (
     initial_window,
     is_finite_window,
     pulse_has_left,
+    stop_time,
 )
 from ._jit import JIT
 
@@ -263,9 +264,11 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
         if n_acc + n_rej >= max_steps:
             status = MAX_STEPS
             break
+        # Land exactly on the end: t_max, or exit_margin after the pulse left (not before t_grid[-1]).
+        t_stop = stop_time(t_max, exit_since, exit_margin, t_needed)
         last = False
-        if t + h >= t_max:
-            h = t_max - t
+        if t + h >= t_stop:
+            h = t_stop - t
             last = True
         # Stages 2..7 (stage 7 is the new solution, reused as stage 1 next step).
         _stages(x, v, Kx, Kv, xs, vs, h, hi, c, inv_m, n, pw, F)
@@ -312,7 +315,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
             v[i] = vs[i]
             Kx[0, i] = Kx[6, i]
             Kv[0, i] = Kv[6, i]
-        t = t + h if not last else t_max
+        t = t + h if not last else t_stop
         n_acc += 1
         if h_fixed > 0.0 and not is_finite_window(x, v, hi):  # adaptive: checked in the error norm
             status = NONFINITE
@@ -327,15 +330,15 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
                 n_eval += 1
 
         if stop_at_exit:
-            if hi == M and pulse_has_left(x, v, obs):
+            if hi == M and pulse_has_left(x, v, m):
                 if exit_since < 0.0:
                     exit_since = t
-                if t - exit_since >= exit_margin and t >= t_needed:
+                if t >= max(exit_since + exit_margin, t_needed):
                     status = SUCCESS
                     break
             else:
                 exit_since = -1.0
-        if last:
+        if last and t == t_max:
             status = T_MAX if stop_at_exit else SUCCESS
             break
 
@@ -345,7 +348,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
             h *= fac
             err_old = max(err, 1e-4)
 
-    final_peaks(obs, v, t, peak_rtol, peak_v, peak_t)
+    final_peaks(obs, v, Kv[0], t, peak_rtol, peak_v, peak_t)
     info[0] = t
     info[1] = n_acc
     info[2] = n_rej

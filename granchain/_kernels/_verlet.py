@@ -27,6 +27,7 @@ from ._common import (
     is_finite_window,
     is_new_peak,
     pulse_has_left,
+    stop_time,
 )
 from ._jit import JIT
 
@@ -73,9 +74,10 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             status = MAX_STEPS
             break
         dt = h
+        t_stop = stop_time(t_max, exit_since, exit_margin, t_needed)
         last = False
-        if t + dt >= t_max:
-            dt = t_max - t
+        if t + dt >= t_stop:
+            dt = t_stop - t
             last = True
         for i in range(hi):
             v_old[i] = v[i]
@@ -102,7 +104,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             g += 1
         for i in range(hi):
             a[i] = a_new[i]
-        t = t + dt if not last else t_max
+        t = t + dt if not last else t_stop
         n_acc += 1
         if not is_finite_window(x, v, hi):
             status = NONFINITE
@@ -113,18 +115,18 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             accelerations(x, c, inv_m, n, pw, hi, F, a)
             n_eval += 1
         if stop_at_exit:
-            if hi == M and pulse_has_left(x, v, obs):
+            if hi == M and pulse_has_left(x, v, m):
                 if exit_since < 0.0:
                     exit_since = t
-                if t - exit_since >= exit_margin and t >= t_needed:
+                if t >= max(exit_since + exit_margin, t_needed):
                     status = SUCCESS
                     break
             else:
                 exit_since = -1.0
-        if last:
+        if last and t == t_max:
             status = T_MAX if stop_at_exit else SUCCESS
             break
-    final_peaks(obs, v, t, peak_rtol, peak_v, peak_t)
+    final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t)
     info[0] = t
     info[1] = n_acc
     info[2] = 0

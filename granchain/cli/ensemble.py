@@ -25,7 +25,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--atol", type=float, default=None, help="DP5 absolute tolerance (default 1e-9)")
     p.add_argument("--chunk-size", type=int, default=500, help="realisations per chunk, the unit of saving (default 500)")
     p.add_argument("--t-end", type=float, default=None, help="end of the time grid of the averaged pulse (default: past the pulse's exit)")
-    p.add_argument("--dt", type=float, default=0.05, help="spacing of the time grid (default 0.05)")
+    p.add_argument("--dt", type=float, default=0.1, help="spacing of the time grid (default 0.1)")
     p.add_argument("--out", required=True, help="Zarr store to write, e.g. runs/N26.zarr")
     p.add_argument("--resume", action="store_true", help="continue an existing store written with the same arguments")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")

@@ -1,0 +1,47 @@
+"""Shared test configuration for the granchain test-suite.
+
+Hypothesis profiles
+-------------------
+* ``dev`` (default): random exploration, no per-example deadline (the first
+  example of a test may include Numba compilation, seconds long).
+* ``ci``: the same, derandomised, so that a CI run is reproducible.
+
+Select one with ``HYPOTHESIS_PROFILE=ci python -m pytest ...``. Each expensive
+property test sets its own (small) ``max_examples``; the profiles only fix the
+deadline and the randomness.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, settings
+
+settings.register_profile("dev", deadline=None, print_blob=True)
+settings.register_profile(
+    "ci", deadline=None, print_blob=True, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+
+@pytest.fixture(scope="session")
+def reference():
+    """The accuracy contract's reference integrator: SciPy DOP853 at rtol 1e-10, atol 1e-12."""
+    import granchain
+
+    return granchain.DOP853(rtol=1e-10, atol=1e-12)
+
+
+def chain_energy(chain, x, v) -> float:
+    """Total energy sum m v^2/2 + sum (c/n) delta^n (paper Eq. hertz-1), in plain NumPy."""
+    d = np.asarray(x[:-1]) - np.asarray(x[1:])
+    pot = np.where(d > 0, chain.stiffness / chain.n * np.clip(d, 0, None) ** chain.n, 0.0)
+    return float(0.5 * np.sum(chain.masses * np.asarray(v) ** 2) + pot.sum())
+
+
+@pytest.fixture(scope="session")
+def energy_of():
+    """``energy_of(chain, x, v)``: the total energy, independent of the package's kernels."""
+    return chain_energy

@@ -1,0 +1,131 @@
+"""Every registered integrator: declared order measured, conservation, registry contract.
+
+Smooth test problem with an exact solution: two unit spheres, n = 2 (linear force while in
+contact). During contact the relative compression is exactly sinusoidal,
+delta(t) = (v/omega) sin(omega t), omega = sqrt(c / M_red), and the centre of mass moves
+uniformly. The force is smooth for delta > 0, so integrating to 0.7 of the half-period
+(inside the contact) with fixed steps shows each method's full order.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import granchain as gc
+
+# How to make each registered integrator take fixed steps of size h. A new integrator added to
+# the registry must be listed here (or in ADAPTIVE_ONLY), so its order gets measured.
+FIXED_STEP = {
+    "dp5": lambda h: gc.DP5(fixed_step=h),
+    "verlet": lambda h: gc.Verlet(dt=h),
+}
+ADAPTIVE_ONLY = {"dop853"}  # SciPy's DOP853: no fixed-step mode; checked for a tiny error instead
+
+DIVISIONS = (8, 16, 32, 64)
+
+
+def harmonic_two_body():
+    chain = gc.from_radii([1.0, 1.0], n=2.0)
+    m1, m2 = chain.masses
+    c = float(chain.stiffness[0])
+    M = m1 * m2 / (m1 + m2)
+    omega = math.sqrt(c / M)
+    v0 = chain.initial_velocity
+    t_end = 0.7 * math.pi / omega
+
+    def exact(t):
+        d = v0 / omega * math.sin(omega * t)
+        dd = v0 * math.cos(omega * t)
+        vcm = m1 * v0 / (m1 + m2)
+        x = np.array([vcm * t + m2 / (m1 + m2) * d, vcm * t - m1 / (m1 + m2) * d])
+        v = np.array([vcm + m2 / (m1 + m2) * dd, vcm - m1 / (m1 + m2) * dd])
+        return x, v
+
+    return chain, t_end, exact
+
+
+def state_error(result, exact, t):
+    x, v = exact(t)
+    return max(np.max(np.abs(result.positions - x)), np.max(np.abs(result.velocities - v)))
+
+
+def test_registry():
+    assert set(gc.INTEGRATORS) == set(FIXED_STEP) | ADAPTIVE_ONLY, "register a fixed-step factory for every integrator"
+    for name, cls in gc.INTEGRATORS.items():
+        assert cls.name == name
+        assert isinstance(cls.order, int) and cls.order >= 2
+        assert gc.get_integrator(name) == cls()
+        assert gc.get_integrator(name.upper()).name == name
+    assert isinstance(gc.get_integrator(None), gc.DP5)
+    custom = gc.DP5(rtol=1e-7)
+    assert gc.get_integrator(custom) is custom
+
+
+@pytest.mark.parametrize("name", sorted(gc.INTEGRATORS))
+def test_convergence_order(name):
+    chain, T, exact = harmonic_two_body()
+    cls = gc.INTEGRATORS[name]
+    if name in ADAPTIVE_ONLY:
+        r = gc.simulate(chain, cls(), t_max=T, stop="t_max")
+        assert r.ok and r.t_end == T
+        assert state_error(r, exact, T) < 1e-9
+        return
+    assert name in FIXED_STEP, f"no fixed-step factory for integrator {name!r}"
+    hs, errs = [], []
+    for k in DIVISIONS:
+        h = T / k
+        r = gc.simulate(chain, FIXED_STEP[name](h), t_max=T, stop="t_max")
+        assert r.ok and r.t_end == T and r.n_rejected == 0
+        hs.append(h)
+        errs.append(state_error(r, exact, T))
+    order = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    print(f"{name}: observed order {order:.3f} (declared {cls.order}); errors {errs}")
+    low = cls.order - max(0.2, 0.1 * cls.order)  # DP5: 4.5, Verlet: 1.8
+    high = cls.order + max(0.2, 0.12 * cls.order)  # DP5: 5.6, Verlet: 2.2
+    assert low <= order <= high, (order, errs)
+
+
+@pytest.mark.parametrize("name", sorted(gc.INTEGRATORS))
+def test_conservation_for_every_integrator(name):
+    chains = [gc.monodisperse(10), gc.tapered(8, 0.1), gc.effective(gc.random_decorated(8, seed=1)), gc.from_radii([1.0, 0.4, 1.0, 0.2, 1.0])]
+    for chain in chains:
+        r = gc.simulate(chain, gc.INTEGRATORS[name]())
+        assert r.ok, (chain, r.message)
+        assert abs(r.momentum_error) < 1e-12, (chain, r.momentum_error)
+        assert abs(r.energy_error) < 1e-5, (chain, r.energy_error)
+
+
+def test_verlet_observables_are_second_order():
+    """Peak velocities, peak times and grid velocities from Verlet converge like h^2."""
+    chain = gc.monodisperse(10)
+    t_grid = np.linspace(0.0, 10.0, 41)
+    ref = gc.simulate(chain, gc.DP5(rtol=1e-12, atol=1e-14), t_grid=t_grid)
+    errs = []
+    for dt in (4e-3, 2e-3, 1e-3):
+        r = gc.simulate(chain, gc.Verlet(dt=dt), t_grid=t_grid)
+        errs.append(
+            [
+                np.max(np.abs(r.peak_velocity - ref.peak_velocity)),
+                np.max(np.abs(r.peak_time - ref.peak_time)[:-1]),  # last granule: plateau, time is the exit
+                np.max(np.abs(r.velocity - ref.velocity)),
+            ]
+        )
+    rates = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all((rates > 1.7) & (rates < 2.3)), rates
+    assert errs[-1][0] < 1e-6
+
+
+def test_dp5_error_follows_rtol():
+    """DP5's error on the observables falls with rtol and stays within ~50 rtol (max-norm control)."""
+    chain = gc.monodisperse(10)
+    ref = gc.simulate(chain, gc.DP5(rtol=1e-12, atol=1e-14))
+    errs = []
+    for rtol in (1e-6, 1e-8, 1e-10):
+        r = gc.simulate(chain, gc.DP5(rtol=rtol, atol=rtol * 1e-2))
+        err = np.max(np.abs(r.peak_velocity - ref.peak_velocity))
+        assert err < 50 * rtol, (rtol, err)
+        errs.append(err)
+    assert errs[0] > errs[1] > errs[2]
