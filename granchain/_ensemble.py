@@ -17,6 +17,7 @@ import datetime as _dt
 import json
 import math
 import os
+import sys
 import warnings
 from dataclasses import dataclass, field
 
@@ -173,8 +174,18 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None) -> dic
     """
     import numba
 
+    previous = numba.get_num_threads()
     if threads is not None:
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    try:
+        return _compute_chunk(spec, j)
+    finally:
+        numba.set_num_threads(previous)
+
+
+def _compute_chunk(spec: EnsembleSpec, j: int) -> dict:
+    import numba
+
     sl = spec.chunk_slice(j)
     idx = np.arange(sl.start, sl.stop)
     small = draw_small_radii(spec.distribution, spec.n_large - 1, spec.seed, idx)
@@ -289,26 +300,24 @@ def _storage_chunks(spec: EnsembleSpec, shape) -> tuple:
     return tuple(min(spec.chunk_size, R) if s == R else s for s in shape)
 
 
-def _progress_dataset(spec: EnsembleSpec, lazy: bool):
+def _progress_dataset(spec: EnsembleSpec):
+    """The ``progress`` group (all zeros) and its encoding."""
     import xarray as xr
 
     C, N, T, J = len(spec.chains), spec.n_large, spec.t_grid.size, spec.n_chunks
-    if lazy:
-        import dask.array as da
-
-        full = lambda shape, fill, dtype, chunks: da.full(shape, fill, dtype=dtype, chunks=chunks)  # noqa: E731
-    else:
-        full = lambda shape, fill, dtype, chunks: np.full(shape, fill, dtype=dtype)  # noqa: E731
-    return xr.Dataset(
+    ds = xr.Dataset(
         {
-            "sum_v": (("chunk", "chain", "granule", "time"), full((J, C, N, T), 0, np.int64, (1, C, N, T))),
-            "sum_v2": (("chunk", "chain", "granule", "time"), full((J, C, N, T), 0, np.int64, (1, C, N, T))),
-            "n_valid": (("chunk", "chain"), full((J, C), 0, np.int64, (1, C))),
-            "done": (("chunk",), full((J,), 0, np.int8, (1,))),
+            "sum_v": (("chunk", "chain", "granule", "time"), np.zeros((J, C, N, T), dtype=np.int64)),
+            "sum_v2": (("chunk", "chain", "granule", "time"), np.zeros((J, C, N, T), dtype=np.int64)),
+            "n_valid": (("chunk", "chain"), np.zeros((J, C), dtype=np.int64)),
+            "done": (("chunk",), np.zeros(J, dtype=np.int8)),
         },
         attrs={"granchain_parameters": json.dumps(spec.describe(), sort_keys=True),
                "about": "bookkeeping of granchain.run_ensemble: fixed-point velocity sums per chunk and done flags"},
     )
+    # One storage chunk per run chunk: each chunk's sums and flag are files of their own.
+    encoding = {"sum_v": {"chunks": (1, C, N, T)}, "sum_v2": {"chunks": (1, C, N, T)}, "n_valid": {"chunks": (1, C)}, "done": {"chunks": (1,)}}
+    return ds, encoding
 
 
 def _chunk_dataset(spec: EnsembleSpec, res: dict):
@@ -385,7 +394,8 @@ class _ZarrSink:
             _check_same_parameters(self.path, stored, spec)
         else:
             _empty_dataset(spec, lazy=True).to_zarr(self.path, mode="w-", compute=False, **_zarr_format())
-            _progress_dataset(spec, lazy=False).to_zarr(self.path, group="progress", mode="a", **_zarr_format())
+            progress, encoding = _progress_dataset(spec)
+            progress.to_zarr(self.path, group="progress", mode="a", encoding=encoding, **_zarr_format())
 
     def _progress(self):
         import xarray as xr
@@ -495,12 +505,8 @@ def run_ensemble(n_large: int = 26, distribution=None, realizations: int = 1000,
     futures = []
     try:
         if client is None:
-            import numba
-
-            if threads is not None:
-                numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
             for j in pending:
-                res = compute_chunk(spec, j)
+                res = compute_chunk(spec, j, threads=threads)
                 sink.write(res)
                 bar.update(res["small_radius"].shape[0])
         else:
@@ -516,7 +522,8 @@ def run_ensemble(n_large: int = 26, distribution=None, realizations: int = 1000,
             client.cancel(futures)
         bar.close()
         if out is not None:
-            print(f"\ninterrupted: finished chunks are saved in {out}; run again with the same arguments to resume", flush=True)
+            print(f"\ninterrupted: finished chunks are saved in {out}; call again with the same arguments "
+                  "(resume=True) to continue", file=sys.stderr, flush=True)
         raise
     bar.close()
     return sink.finalize()

@@ -76,10 +76,15 @@ class PulseResult:
     def message(self) -> str:
         return self.status.message
 
-    def table(self) -> str:
-        """A readable table of peak velocity and peak time per observed granule."""
+    def table(self, labels=None) -> str:
+        """A readable table of peak velocity and peak time per observed granule.
+
+        ``labels`` replaces the 1-based chain indices in the first column (e.g. the
+        large-granule index k = 1..N of a decorated chain).
+        """
+        labels = self.granule if labels is None else labels
         lines = [f"{'granule':>8} {'peak_velocity':>15} {'peak_time':>12}"]
-        for k, vp, tp in zip(self.granule, self.peak_velocity, self.peak_time):
+        for k, vp, tp in zip(labels, self.peak_velocity, self.peak_time):
             lines.append(f"{k:8d} {vp:15.9f} {tp:12.6f}")
         lines.append(
             f"# {self.chain.kind} chain, M = {self.chain.size}, n = {self.chain.n:g}, integrator {self.integrator}: "

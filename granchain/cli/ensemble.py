@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
@@ -57,6 +59,10 @@ def run(args) -> int:
             t_grid=grid, chunk_size=args.chunk_size, out=args.out, resume=args.resume, client=client,
             progress=not args.quiet, threads=args.threads,
         )
+    except KeyboardInterrupt:
+        print(f"granchain ensemble: interrupted; finished chunks are saved in {args.out}. "
+              "Run the same command with --resume to continue.", file=sys.stderr)
+        return 130
     finally:
         if client is not None:
             client.close()

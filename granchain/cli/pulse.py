@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import sys
 
+import numpy as np
+
 
 def _floats(text: str) -> list[float]:
     try:
@@ -61,14 +63,19 @@ def run(args) -> int:
             raise ValueError("--effective needs --small-radii (a decorated chain)")
         chain = gc.from_radii(_floats(args.radii), n=args.n)
     result = gc.simulate(chain, _integrator(args))
+    # Decorated (and effective) chains are reported by large-granule index k = 1..N
+    # (decorated chain index 2k - 1); a chain from --radii by its own index.
+    labels = np.arange(1, result.granule.size + 1) if args.small_radii is not None else result.granule
     if args.json:
         print(json.dumps({
-            "granule": [int(k) for k in result.granule],
+            "granule": [int(k) for k in labels],
             "peak_velocity": [float(v) for v in result.peak_velocity],
             "peak_time": [float(t) for t in result.peak_time],
         }))
     else:
-        print(result.table())
+        print(result.table(labels))
+        if args.small_radii is not None:
+            print("# granule = large-granule index k (decorated chain index 2k - 1)")
     if not result.ok:
         print(f"warning: {result.status.name}: {result.message}", file=sys.stderr)
         return 1

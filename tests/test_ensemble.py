@@ -1,0 +1,503 @@
+"""run_ensemble: many random decorated chains, seeded, parallel, resumable, on disk, on Dask.
+
+What is checked (DESIGN.md Secs. 2 and 5; issue "Ensembles of tens of thousands of random chains"):
+
+* the result never depends on how the work was split: chunk size, Numba threads or Dask
+  workers change nothing, bit for bit, per realisation AND in the averaged pulse (the kernel
+  sums velocities in fixed point, so the mean is exact too);
+* each realisation is exactly what ``simulate`` gives for the same chain and tolerances,
+  and realisation i's radii depend only on (seed, i);
+* an interrupted run (SIGKILL, SIGINT) resumed with the same arguments gives the same store
+  as an uninterrupted run; other arguments or an existing store without --resume are refused;
+* ``mean_velocity`` is the plain mean of the per-realisation traces (to the fixed-point
+  rounding 2^-40), its standard error the sample std / sqrt(n);
+* decorated and effective chains of the same realisations agree as the paper says;
+* the store explains itself (units, long names, parameters) and needs no granchain to read;
+* a failed realisation is a status, not an exception; bad arguments name the parameter;
+* (slow) Numba's on-disk cache never serves an ensemble kernel compiled against older
+  integrator code.
+
+Stores live under pytest's tmp_path. Small chains (N = 6, 11) keep the file fast.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+import xarray as xr
+
+import granchain as gc
+from granchain import _ensemble as ens
+
+N = 6  # large granules of the small test ensembles
+SEED = 11
+R = 40  # realisations of the small test ensembles
+PER_REALISATION = ("small_radius", "peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end")
+AVERAGED = ("mean_velocity", "mean_velocity_stderr", "n_valid")
+COORDS = ("chain", "realization", "granule", "gap", "time")
+FIXED_POINT_ULP = 2.0**-40  # the fixed-point resolution of the velocity sums (fixed_point_bits = 40)
+DP5_ENSEMBLE = gc.DP5(rtol=gc.ENSEMBLE_RTOL, atol=gc.ENSEMBLE_ATOL)
+
+
+@pytest.fixture(autouse=True)
+def _restore_numba_threads():
+    """run_ensemble(threads=...) changes Numba's process-wide thread count: undo it after each test."""
+    before = numba.get_num_threads()
+    yield
+    numba.set_num_threads(before)
+
+
+def assert_identical(a, b, names=PER_REALISATION + AVERAGED, coords=COORDS):
+    """Bitwise equality (NaN == NaN) of the named variables and coordinates of two Datasets."""
+    for name in names + coords:
+        x, y = np.asarray(a[name].values), np.asarray(b[name].values)
+        assert x.shape == y.shape, f"{name}: shapes {x.shape} != {y.shape}"
+        if x.dtype.kind in "fc":
+            same = np.array_equal(x, y, equal_nan=True)
+        else:
+            same = np.array_equal(x, y)
+        if not same:
+            diff = np.nanmax(np.abs(x.astype(float) - y.astype(float))) if x.dtype.kind in "fiu" else "n/a"
+            pytest.fail(f"{name} differs (max |difference| {diff})")
+
+
+@pytest.fixture(scope="module")
+def local():
+    """The reference: a local, in-memory run with default threads and chunk_size 16."""
+    return gc.run_ensemble(N, realizations=R, seed=SEED, chunk_size=16, progress=False)
+
+
+# -- 1. the split of the work changes nothing -------------------------------------------------
+def test_reference_run_is_complete(local):
+    assert local.sizes == {"chain": 2, "realization": R, "granule": N, "gap": N - 1, "time": gc.default_time_grid(N).size}
+    assert list(local["chain"].values) == ["decorated", "effective"]
+    assert np.all(local["status"].values == gc.Status.SUCCESS)
+    np.testing.assert_array_equal(local["n_valid"].values, [R, R])
+    assert np.all(np.isfinite(local["peak_velocity"].values)) and np.all(np.isfinite(local["mean_velocity"].values))
+    # the struck granule: v = 1 at t = 0; every later large granule peaks later
+    np.testing.assert_array_equal(local["peak_velocity"].values[..., 0], 1.0)
+    assert np.all(np.diff(local["peak_time"].values[..., : N - 1], axis=-1) > 0)
+
+
+@pytest.mark.parametrize("chunk_size, threads", [(7, None), (40, None), (16, 1), (7, 2), (40, 1)])
+def test_chunking_and_threads_do_not_change_results(local, chunk_size, threads):
+    ds = gc.run_ensemble(N, realizations=R, seed=SEED, chunk_size=chunk_size, threads=threads, progress=False)
+    assert_identical(ds, local)
+
+
+def test_run_ensemble_threads_leaves_the_default_alone():
+    """``threads=None`` means "all cores" (docstring): an earlier ``threads=1`` call must not stick."""
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    gc.run_ensemble(N, realizations=4, seed=SEED, chunk_size=4, threads=1, progress=False)
+    assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS, (
+        "run_ensemble(threads=1) left Numba at 1 thread for every later run_ensemble()/simulate() call"
+    )
+
+
+def test_dask_cluster_gives_the_local_result(local, tmp_path):
+    """Two worker processes with one thread each, writing a Zarr store: identical to the local run."""
+    distributed = pytest.importorskip("distributed")
+    store = tmp_path / "dask.zarr"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client:
+            ds = gc.run_ensemble(N, realizations=R, seed=SEED, chunk_size=7, out=store, client=client, progress=False)
+            n_workers = len(client.scheduler_info()["workers"])
+    assert n_workers == 2
+    assert_identical(ds, local)
+    with xr.open_dataset(store, engine="zarr") as on_disk:
+        assert_identical(on_disk, local)
+
+
+# -- 2. each realisation is simulate() of its own chain -----------------------------------------
+def test_rows_equal_simulate(local):
+    grid = local["time"].values
+    for i in range(R):
+        chain = gc.random_decorated(N, seed=SEED, realization=i)
+        np.testing.assert_array_equal(local["small_radius"].values[i], chain.meta["small_radii"])
+        for kind, ch in (("decorated", chain), ("effective", gc.effective(chain))):
+            r = gc.simulate(ch, DP5_ENSEMBLE, t_grid=grid)
+            row = local.sel(chain=kind, realization=i)
+            np.testing.assert_array_equal(row["peak_velocity"].values, r.peak_velocity, err_msg=f"{kind} realisation {i}")
+            np.testing.assert_array_equal(row["peak_time"].values, r.peak_time, err_msg=f"{kind} realisation {i}")
+            assert int(row["status"]) == int(r.status)
+            assert int(row["n_steps"]) == r.n_steps
+            assert float(row["t_end"]) == r.t_end
+            assert float(row["energy_error"]) == r.energy_error
+
+
+def test_radii_depend_only_on_seed_and_index(local):
+    longer = gc.run_ensemble(N, realizations=60, seed=SEED, chunk_size=25, progress=False)
+    np.testing.assert_array_equal(longer["small_radius"].values[:R], local["small_radius"].values)
+    # not only the radii: every per-realisation result of the first 40 is the same
+    assert_identical(longer.isel(realization=slice(0, R)), local, names=PER_REALISATION, coords=("chain", "granule", "gap", "time"))
+    np.testing.assert_array_equal(local["small_radius"].values, gc.draw_small_radii(None, N - 1, SEED, np.arange(R)))
+    other = gc.run_ensemble(N, realizations=R, seed=SEED + 1, chains="effective", chunk_size=16, progress=False)
+    assert np.all(np.any(other["small_radius"].values != local["small_radius"].values, axis=1)), "another seed must change every row"
+    # realisation i's stream is SeedSequence(seed).spawn(i + 1)[i] (as documented)
+    for i in (0, 7, 39):
+        a = gc.realization_rng(SEED, i).random(4)
+        b = np.random.default_rng(np.random.SeedSequence(SEED).spawn(i + 1)[i]).random(4)
+        np.testing.assert_array_equal(a, b)
+    # the paper's distribution U[0.01, 0.4]
+    small = longer["small_radius"].values
+    assert small.min() >= 0.01 and small.max() <= 0.4
+
+
+# -- 3. interrupted runs resume to the uninterrupted result ------------------------------------
+CLI = ["--large", "6", "--realizations", "400", "--chunk-size", "20", "--quiet", "--threads", "1"]
+CHUNKS = 20  # 400 / 20
+
+
+def _cli(store, *args, resume=True):
+    return [sys.executable, "-m", "granchain", "ensemble", *CLI, "--out", str(store), *(["--resume"] if resume else []), *args]
+
+
+def _done_chunks(store) -> int:
+    try:
+        with xr.open_zarr(store, group="progress", consolidated=False) as p:
+            return int(p["done"].values.sum())
+    except Exception:  # not created yet, or a chunk being replaced right now
+        return 0
+
+
+def _run_to_completion(cmd, cwd):
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=600)
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout: {proc.stdout}\nstderr: {proc.stderr}"
+    assert "failed integrations: 0" in proc.stdout
+    return proc
+
+
+def _interrupt(store, sig, cwd, min_done=3, timeout=240.0):
+    """Start the CLI, wait until ``min_done`` chunks are on disk, send ``sig``; (returncode, stdout, stderr)."""
+    proc = subprocess.Popen(_cli(store), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
+    try:
+        deadline = time.monotonic() + timeout  # includes interpreter start and loading the Numba cache
+        while _done_chunks(store) < min_done:
+            if proc.poll() is not None:
+                out, err = proc.communicate()
+                pytest.fail(f"the run ended (exit {proc.returncode}) before it could be interrupted\n{out}\n{err}")
+            if time.monotonic() > deadline:
+                pytest.fail(f"fewer than {min_done} chunks done after {timeout} s")
+            time.sleep(0.02)
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, out, err
+
+
+def _chunk_files(store) -> dict:
+    """Modification times of the storage chunks of one per-realisation variable (one per run chunk)."""
+    root = os.path.join(store, "small_radius")
+    files = {}
+    for dirpath, _, names in os.walk(root):
+        for name in names:
+            if not name.startswith(".") and name != "zarr.json":
+                path = os.path.join(dirpath, name)
+                files[path] = os.stat(path).st_mtime_ns
+    return files
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """The same CLI arguments run once without interruption."""
+    work = tmp_path_factory.mktemp("uninterrupted")
+    store = work / "full.zarr"
+    _run_to_completion(_cli(store), cwd=work)
+    return store
+
+
+def _resume_and_compare(store, uninterrupted, cwd):
+    done = _done_chunks(store)
+    assert 3 <= done < CHUNKS, f"{done} chunks done: the interruption should leave a partial store"
+    before = _chunk_files(store)
+    _run_to_completion(_cli(store), cwd=cwd)
+    after = _chunk_files(store)
+    # done chunks are skipped, not recomputed: their storage chunks are untouched
+    unchanged = sum(after.get(p) == t for p, t in before.items())
+    assert unchanged >= done, f"only {unchanged} storage chunks untouched, {done} chunks were done before resuming"
+    assert _done_chunks(store) == CHUNKS
+    with xr.open_dataset(store, engine="zarr") as a, xr.open_dataset(uninterrupted, engine="zarr") as b:
+        assert_identical(a, b)
+        assert np.all(a["status"].values == 0) and np.all(a["n_valid"].values == 400)
+
+
+def test_resume_after_sigkill_is_bitwise_identical(tmp_path, uninterrupted):
+    store = tmp_path / "killed.zarr"
+    returncode, _, _ = _interrupt(store, signal.SIGKILL, cwd=tmp_path)
+    assert returncode == -signal.SIGKILL
+    _resume_and_compare(store, uninterrupted, cwd=tmp_path)
+
+
+@pytest.fixture(scope="module")
+def sigint_run(tmp_path_factory):
+    work = tmp_path_factory.mktemp("sigint")
+    store = work / "interrupted.zarr"
+    returncode, out, err = _interrupt(store, signal.SIGINT, cwd=work)
+    return store, work, returncode, out, err
+
+
+def test_sigint_stops_with_a_resume_hint(sigint_run):
+    store, _, returncode, out, err = sigint_run
+    assert returncode != 0, "an interrupted run must not report success"
+    assert "interrupted" in out + err and "resume" in out + err and str(store) in out + err
+    assert 3 <= _done_chunks(store) < CHUNKS
+
+
+def test_resume_after_sigint_is_bitwise_identical(sigint_run, uninterrupted):
+    store, work, *_ = sigint_run
+    _resume_and_compare(store, uninterrupted, cwd=work)
+
+
+def test_sigint_is_reported_cleanly_by_the_cli(sigint_run):
+    """Ctrl-C is an expected event for a long run: a one-line hint naming --resume, no traceback."""
+    _, _, returncode, out, err = sigint_run
+    assert returncode in (130, -signal.SIGINT)
+    assert "--resume" in out + err, f"the hint must tell a CLI user to add --resume, got: {(out + err).strip()}"
+    assert "Traceback" not in err, "Ctrl-C printed a Python traceback"
+
+
+def test_resume_with_other_parameters_is_refused(uninterrupted, capsys):
+    from granchain.cli import main
+
+    for args, what in ((["--seed", "1"], "seed"), (["--realizations", "300"], "realizations"), (["--beta", "0.3"], "distribution")):
+        argv = ["ensemble", *CLI, "--out", str(uninterrupted), "--resume"]
+        for flag, value in zip(args[::2], args[1::2]):
+            if flag in argv:
+                argv[argv.index(flag) + 1] = value
+            else:
+                argv += [flag, value]
+        assert main(argv) == 2
+        captured = capsys.readouterr()
+        assert captured.out == ""
+        assert "different parameters" in captured.err and what in captured.err, captured.err
+    with xr.open_dataset(uninterrupted, engine="zarr") as ds:  # untouched
+        assert ds.attrs["seed"] == 0 and ds.sizes["realization"] == 400
+
+
+def test_existing_store_without_resume_is_refused(uninterrupted, tmp_path, capsys):
+    from granchain.cli import main
+
+    assert main(["ensemble", *CLI, "--out", str(uninterrupted)]) == 2
+    captured = capsys.readouterr()
+    assert "already exists" in captured.err and "--resume" in captured.err and captured.out == ""
+    # not a granchain store at all
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    assert main(["ensemble", *CLI, "--out", str(foreign), "--resume"]) == 2
+    assert "not a granchain ensemble store" in capsys.readouterr().err
+    # the library refuses the same way
+    with pytest.raises(ValueError, match="already exists"):
+        gc.run_ensemble(6, realizations=400, chunk_size=20, out=uninterrupted, resume=False, progress=False)
+
+
+# -- 4. the averaged pulse -----------------------------------------------------------------------
+def test_mean_velocity_is_the_mean_of_simulated_traces():
+    n_real = 30
+    ds = gc.run_ensemble(N, realizations=n_real, seed=5, chunk_size=8, progress=False)
+    grid = ds["time"].values
+    for kind in ("decorated", "effective"):
+        traces = []
+        for i in range(n_real):
+            chain = gc.random_decorated(N, seed=5, realization=i)
+            r = gc.simulate(chain if kind == "decorated" else gc.effective(chain), DP5_ENSEMBLE, t_grid=grid)
+            assert r.ok
+            traces.append(r.velocity)
+        v = np.array(traces)  # (realisation, granule, time)
+        mean = v.mean(axis=0)
+        se = v.std(axis=0, ddof=1) / np.sqrt(n_real)
+        got = ds.sel(chain=kind)
+        assert int(got["n_valid"]) == n_real
+        # each velocity is rounded to a multiple of 2^-40 before summing: |error| <= 2^-41 per term
+        np.testing.assert_allclose(got["mean_velocity"].values, mean, rtol=0, atol=1e-11)
+        # the variance comes from sums of v and v^2 in fixed point: |error of se^2| <= 3 * 2^-41 / (n - 1)
+        np.testing.assert_allclose(got["mean_velocity_stderr"].values ** 2, se**2, rtol=1e-9, atol=4 * 2.0**-41 / (n_real - 1))
+        np.testing.assert_allclose(got["mean_velocity_stderr"].values, se, rtol=1e-6, atol=3e-7)
+        # the grid starts with the struck granule at v = 1, all others at rest
+        np.testing.assert_array_equal(got["mean_velocity"].values[:, 0], [1.0] + [0.0] * (N - 1))
+
+
+# -- 5. decorated vs effective chains (paper Sec. IV) --------------------------------------------
+def test_decorated_and_effective_chains_agree():
+    """N = 11, 300 paired realisations. Observed (seeds 2024, 7, 99): mean arrival times differ by
+    at most 0.034 at k = 2..N-1 (growing ~0.003 per granule, the decorated chain slightly ahead),
+    mean peak velocities by <= 0.2 % at k = 2..N-1 and 0.5 % at the free end k = N (the effective
+    chain's last granule is faster), averaged-pulse peaks by <= 0.71 %, their times by one grid
+    step. k = 1 (struck) and k = N (free end) are excluded from the arrival times, as in the
+    paper's fits."""
+    n_large = 11
+    ds = gc.run_ensemble(n_large, realizations=300, seed=2024, chunk_size=100, progress=False)
+    assert np.all(ds["status"].values == 0)
+    dec, eff = ds.sel(chain="decorated"), ds.sel(chain="effective")
+    inner = slice(1, n_large - 1)  # k = 2..N-1
+    t_dec, t_eff = dec["peak_time"].mean("realization").values, eff["peak_time"].mean("realization").values
+    dt = np.abs(t_dec - t_eff)[inner]
+    assert dt.max() < 0.05, f"mean arrival times differ by {dt.max():.4f}"
+    # and the arrival time grows like the paper's ~2.4 per large granule
+    slope = np.polyfit(np.arange(2, n_large), t_dec[inner], 1)[0]
+    assert 2.3 < slope < 2.5, slope
+    v_dec, v_eff = dec["peak_velocity"].mean("realization").values, eff["peak_velocity"].mean("realization").values
+    dv = np.abs(v_eff / v_dec - 1)
+    assert dv[inner].max() < 0.005, f"mean peak velocities differ by {dv[inner].max():.2%}"
+    assert dv[-1] < 0.01, f"mean peak velocities at the free end differ by {dv[-1]:.2%}"
+    a_dec, a_eff = dec["mean_velocity"].max("time").values, eff["mean_velocity"].max("time").values
+    da = np.abs(a_eff / a_dec - 1)[1:]
+    assert da.max() < 0.015, f"averaged-pulse peaks differ by {da.max():.2%}"
+    tm = np.abs(dec["mean_velocity"].idxmax("time").values - eff["mean_velocity"].idxmax("time").values)
+    step = float(np.diff(ds["time"].values).max())
+    assert tm.max() <= max(0.1, step) + 1e-9, tm  # within one grid step (or 0.1)
+    # the two amplitudes of DESIGN.md Sec. 2 are different things: the averaged pulse decays faster
+    assert np.all(a_dec[2:] < v_dec[2:])
+
+
+# -- 6. a store that explains itself ---------------------------------------------------------------
+def test_every_variable_is_described(local):
+    for name, var in local.data_vars.items():
+        assert var.attrs.get("units"), f"{name} has no units"
+        assert var.attrs.get("long_name"), f"{name} has no long_name"
+    for name, coord in local.coords.items():
+        assert coord.attrs.get("long_name"), f"coordinate {name} has no long_name"
+    assert local["time"].attrs.get("units")
+    for key in ("seed", "realizations", "granchain_version", "created", "granchain_parameters"):
+        assert key in local.attrs, key
+    params = json.loads(local.attrs["granchain_parameters"])
+    assert params["seed"] == SEED == local.attrs["seed"]
+    assert params["realizations"] == R == local.attrs["realizations"]
+    assert params["n_large"] == N and params["rtol"] == gc.ENSEMBLE_RTOL and params["atol"] == gc.ENSEMBLE_ATOL
+    assert local.attrs["granchain_version"] == gc.__version__
+
+
+def test_store_opens_without_granchain(tmp_path):
+    store = tmp_path / "plain.zarr"
+    gc.run_ensemble(N, realizations=12, seed=3, chunk_size=5, out=store, progress=False)
+    script = textwrap.dedent(
+        f"""
+        import json, sys
+        import xarray as xr
+        ds = xr.open_dataset({str(store)!r}, engine="zarr")
+        out = {{
+            "granchain_imported": "granchain" in sys.modules,
+            "sizes": dict(ds.sizes),
+            "attrs": sorted(ds.attrs),
+            "undescribed": [k for k, v in ds.data_vars.items() if not (v.attrs.get("units") and v.attrs.get("long_name"))],
+            "params": json.loads(ds.attrs["granchain_parameters"]),
+            "n_valid": ds["n_valid"].values.tolist(),
+            "chain": [str(c) for c in ds["chain"].values],
+        }}
+        print(json.dumps(out))
+        """
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert got["granchain_imported"] is False
+    assert got["undescribed"] == []
+    assert got["sizes"]["realization"] == 12 and got["sizes"]["granule"] == N
+    assert {"seed", "realizations", "granchain_version", "created", "granchain_parameters"} <= set(got["attrs"])
+    assert got["params"]["seed"] == 3 and got["n_valid"] == [12, 12] and got["chain"] == ["decorated", "effective"]
+
+
+# -- 7. failures are statuses -----------------------------------------------------------------------
+def test_failed_realisations_are_recorded_not_fatal():
+    """A step budget between the cheapest and dearest decorated realisations: some fail
+    (MAX_STEPS), the others and every effective chain succeed; only successes enter the sums."""
+    assert int(gc.Status.MAX_STEPS) == 2 and int(gc.Status.SUCCESS) == 0
+    full = ens.compute_chunk(ens.EnsembleSpec(N, realizations=16, seed=3, chunk_size=16), 0)
+    steps = full["n_steps"][0]
+    budget = int(np.median(steps))
+    spec = ens.EnsembleSpec(N, realizations=16, seed=3, chunk_size=16, max_steps=budget)
+    out = ens.compute_chunk(spec, 0)
+    status = out["status"]
+    assert set(np.unique(status[0])) == {0, 2}, status[0]
+    assert np.all(status[1] == 0), "effective chains take ~150 steps: all succeed"
+    assert np.all(status[0][steps >= budget] == 2)  # accepted steps alone exceed the budget
+    assert np.all(out["n_steps"][0][status[0] == 2] <= budget)
+    np.testing.assert_array_equal(out["n_valid"][:, 0], [(status[0] == 0).sum(), 16])
+    ok = status[0] == 0
+    np.testing.assert_array_equal(out["peak_velocity"][0][ok], full["peak_velocity"][0][ok])
+    # the velocity sums hold exactly the successful realisations (same fixed-point rounding)
+    scale = 2.0**spec.fixed_point_bits
+    expected = np.zeros_like(out["sum_v"][0])
+    for i in np.flatnonzero(ok):
+        r = gc.simulate(gc.random_decorated(N, seed=3, realization=i), DP5_ENSEMBLE, t_grid=spec.t_grid)
+        expected += np.rint(r.velocity * scale).astype(np.int64)
+    np.testing.assert_array_equal(out["sum_v"][0], expected)
+
+
+# -- 8. argument validation ---------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"chains": "foo"}, "chains"),
+        ({"realizations": 0}, "realizations"),
+        ({"chunk_size": 0}, "chunk_size"),
+        ({"t_grid": [0.0, 2.0, 1.0]}, "t_grid"),
+        ({"t_grid": []}, "t_grid"),
+        ({"n": 1}, "n"),
+        ({"n_large": 1}, "n_large"),
+        ({"seed": -1}, "seed"),
+        ({"rtol": 0.0}, "rtol"),
+    ],
+)
+def test_bad_arguments_name_the_parameter(kwargs, name, tmp_path):
+    store = tmp_path / "never.zarr"
+    args = {"n_large": N, "realizations": 4, "progress": False, "out": store} | kwargs
+    with pytest.raises(ValueError, match=rf"\b{name}\b"):
+        gc.run_ensemble(**args)
+    assert not store.exists(), "a refused run must not leave a store behind"
+
+
+# -- 9. the compiled-kernel cache ----------------------------------------------------------------------
+_CACHE_PROBE = """
+import json, sys
+sys.path.insert(0, {root!r})
+import granchain as gc
+assert gc.__file__.startswith({root!r}), gc.__file__
+ds = gc.run_ensemble(4, realizations=2, seed=1, chains="decorated", chunk_size=2, progress=False)
+r = gc.simulate(gc.random_decorated(4, seed=1, realization=0), gc.DP5(rtol=gc.ENSEMBLE_RTOL, atol=gc.ENSEMBLE_ATOL),
+                t_grid=ds["time"].values)
+print(json.dumps({{"ensemble": int(ds["n_steps"].values[0, 0]), "simulate": r.n_steps}}))
+"""
+
+
+@pytest.mark.slow
+def test_kernel_cache_follows_edits_of_the_integrator(tmp_path):
+    """``cache=True`` keys a kernel's cache on its own source file only. The ensemble kernel
+    (``_kernels/_ensemble.py``) inlines ``dp5_integrate`` (``_kernels/_dp5.py``): after an edit of
+    the integrator alone, a stale cache would make ``run_ensemble`` integrate with the old code
+    while ``simulate`` uses the new one. On a copy of the package: warm the cache, change the
+    step-size controller's safety factor, and check that both still take the same steps."""
+    root = tmp_path / "pkg"
+    shutil.copytree(Path(gc.__file__).parent, root / "granchain", ignore=shutil.ignore_patterns("__pycache__"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+
+    def probe():
+        proc = subprocess.run([sys.executable, "-c", _CACHE_PROBE.format(root=str(root))], capture_output=True, text=True,
+                              cwd=tmp_path, env=env, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    before = probe()
+    assert before["ensemble"] == before["simulate"]
+    dp5 = root / "granchain" / "_kernels" / "_dp5.py"
+    text = dp5.read_text()
+    assert "\nSAFETY = 0.9\n" in text, "the probe edits SAFETY = 0.9 in _kernels/_dp5.py: update the test"
+    dp5.write_text(text.replace("\nSAFETY = 0.9\n", "\nSAFETY = 0.8\n"))
+    after = probe()
+    assert after["simulate"] != before["simulate"], "the edit should change the step sequence"
+    assert after["ensemble"] == after["simulate"], (
+        f"run_ensemble used a stale compiled kernel: {after['ensemble']} steps, simulate {after['simulate']}"
+    )
