@@ -95,7 +95,6 @@ def summary_rows(datasets: dict, figs: dict) -> list[Row]:
     """The report table: each number the paper reports beside granchain's value."""
     rows: list[Row] = []
     f2, f3, f4 = figs["fig2"], figs["fig3"], figs["fig4"]
-    N23 = len(f3.granule)
     rng = f"k = {f2.fit_range[0]}..{f2.fit_range[1]}"
     for c in f2.chains:
         fk, ft = f2.fit_k[c], f2.fit_t[c]
@@ -178,7 +177,7 @@ def write_report(out: Path, rows: list[Row], meta: dict) -> tuple[Path, Path]:
     md += ["", f"Cite: {CITATION}", ""]
     md_path = out / "report.md"
     md_path.write_text("\n".join(md))
-    body = [f"<h1>granchain: reproduction of &ldquo;Pulse propagation in decorated random chains&rdquo;</h1>",
+    body = ["<h1>granchain: reproduction of &ldquo;Pulse propagation in decorated random chains&rdquo;</h1>",
             "".join(f"<p>{html.escape(line)}</p>" for line in head[2:11] if line),
             "<table border='1' cellspacing='0' cellpadding='4'><tr><th>section</th><th>quantity</th><th>paper</th><th>granchain</th><th>note</th></tr>"]
     body += [f"<tr><td>{html.escape(r.section)}</td><td>{html.escape(r.quantity)}</td><td>{html.escape(r.paper)}</td>"

@@ -156,6 +156,26 @@ def pulse_has_left(x, v, m):
 
 
 @njit(**JIT)
+def end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed):
+    """Bookkeeping after an accepted step: (status, or -1 to go on; updated exit_since).
+
+    ``exit_since`` is the time since which the pulse has been out of the chain
+    (-1 while it is not); the run succeeds ``exit_margin`` later (not before t_needed).
+    """
+    if stop_at_exit:
+        if hi == x.shape[0] and pulse_has_left(x, v, m):
+            if exit_since < 0.0:
+                exit_since = t
+            if t >= max(exit_since + exit_margin, t_needed):
+                return SUCCESS, exit_since
+        else:
+            exit_since = -1.0
+    if t == t_max:
+        return (T_MAX if stop_at_exit else SUCCESS), exit_since
+    return -1, exit_since
+
+
+@njit(**JIT)
 def stop_time(t_max, exit_since, exit_margin, t_needed):
     """Where the run must end: exit_margin after the exit (not before t_needed), at most t_max."""
     if exit_since < 0.0:

@@ -25,8 +25,6 @@ from ._common import (
     MAX_STEPS,
     NONFINITE,
     STEP_UNDERFLOW,
-    SUCCESS,
-    T_MAX,
     accelerations,
     advance_window,
     contact_force,
@@ -34,7 +32,7 @@ from ._common import (
     is_new_peak,
     initial_window,
     is_finite_window,
-    pulse_has_left,
+    end_of_step,
     stop_time,
 )
 from ._jit import JIT
@@ -196,8 +194,8 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, rtol, atol, ratio):
         ev = h * (E1 * Kv[0, i] + E3 * Kv[2, i] + E4 * Kv[3, i] + E5 * Kv[4, i] + E6 * Kv[5, i] + E7 * Kv[6, i])
         sx = atol + rtol * max(abs(x[i]), abs(xs[i]))
         sv = atol + rtol * max(abs(v[i]), abs(vs[i]))
-        ratio[2 * i] = abs(ex) / sx
-        ratio[2 * i + 1] = abs(ev) / sv
+        ratio[i] = abs(ex) / sx
+        ratio[hi + i] = abs(ev) / sv
     err = 0.0
     for i in range(2 * hi):
         r = ratio[i]
@@ -329,17 +327,8 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
                     Kx[0, i] = v[i]
                 n_eval += 1
 
-        if stop_at_exit:
-            if hi == M and pulse_has_left(x, v, m):
-                if exit_since < 0.0:
-                    exit_since = t
-                if t >= max(exit_since + exit_margin, t_needed):
-                    status = SUCCESS
-                    break
-            else:
-                exit_since = -1.0
-        if last and t == t_max:
-            status = T_MAX if stop_at_exit else SUCCESS
+        status, exit_since = end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed)
+        if status >= 0:
             break
 
         if h_fixed <= 0.0:

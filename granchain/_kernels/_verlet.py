@@ -10,7 +10,6 @@ method's own second order.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit
@@ -18,15 +17,13 @@ from numba import njit
 from ._common import (
     MAX_STEPS,
     NONFINITE,
-    SUCCESS,
-    T_MAX,
     accelerations,
     advance_window,
     final_peaks,
     initial_window,
     is_finite_window,
     is_new_peak,
-    pulse_has_left,
+    end_of_step,
     stop_time,
 )
 from ._jit import JIT
@@ -114,17 +111,8 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             hi = new_hi
             accelerations(x, c, inv_m, n, pw, hi, F, a)
             n_eval += 1
-        if stop_at_exit:
-            if hi == M and pulse_has_left(x, v, m):
-                if exit_since < 0.0:
-                    exit_since = t
-                if t >= max(exit_since + exit_margin, t_needed):
-                    status = SUCCESS
-                    break
-            else:
-                exit_since = -1.0
-        if last and t == t_max:
-            status = T_MAX if stop_at_exit else SUCCESS
+        status, exit_since = end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed)
+        if status >= 0:
             break
     final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t)
     info[0] = t

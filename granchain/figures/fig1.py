@@ -58,5 +58,5 @@ def plot(data: Fig1Data, ax=None):
     ax.set_ylabel(r"averaged velocity $\langle v_k(t)\rangle$ " + VELOCITY_UNITS)
     ax.set_title(f"Averaged velocity of the large granules, N = {K} ({data.realizations} realisations)", fontsize=10)
     ax.set_xlim(data.time[0], data.time[-1])
-    ax.legend(loc="upper right", frameon=False)
+    ax.legend(loc="center right", frameon=False)
     return fig

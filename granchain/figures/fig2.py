@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import analysis
-from ._style import COLORS, TIME_LABEL, VELOCITY_UNITS, axes
+from ._style import COLORS, VELOCITY_UNITS, axes
 
 
 @dataclass(frozen=True, eq=False)

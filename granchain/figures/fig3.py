@@ -66,18 +66,19 @@ def compute(ds, fit_range=(4, 25)) -> Fig3Data:
 def plot(data: Fig3Data, ax=None):
     fig, ax = axes(ax, figsize=(6.4, 4.6))
     markers = {"decorated": "o", "effective": "s"}
+    inner = slice(0, -1)  # k = N, the free end, flies off: its "arrival" is a plateau, not a peak
     for c in data.chains:
         face = COLORS[c] if c == "decorated" else "none"
-        ax.plot(data.granule, data.pulse_time[c], markers[c], ms=5, mfc=face, color=COLORS[c],
-                label=fr"$\mathrm{{argmax}}_t\langle v_k\rangle$, {c} chain")
+        ax.plot(data.granule[inner], data.pulse_time[c][inner], markers[c], ms=5, mfc=face, color=COLORS[c],
+                label=fr"$\mathrm{{argmax}}_t\langle v_k\rangle$, {c} chain (k < N)")
     main = "effective" if "effective" in data.chains else data.chains[0]
     f = data.fit[main]
-    k = np.linspace(1, data.granule[-1], 100)
+    k = np.linspace(1, data.granule[-2], 100)
     ax.plot(k, f(k), color="tab:orange", lw=1.8,
             label=fr"fit ({main}, k = {data.fit_range[0]}..{data.fit_range[1]}): t = ({f.slope:.4f}±{f.slope_err:.4f}) k {f.intercept:+.3f}")
     ax.plot(k, data.S * k + f.intercept, color=COLORS["bca"], ls="--", lw=1.4,
             label=fr"BCA slope S = {data.S:.4f} (Eq. slope), same intercept")
-    ax.plot(data.granule, data.bca_mean, "x", color=COLORS["bca"], ms=5, label="BCA mean arrival time, Eq. (total-time)")
+    ax.plot(data.granule[inner], data.bca_mean[inner], "x", color=COLORS["bca"], ms=5, label="BCA mean arrival time, Eq. (total-time)")
     ax.plot(k, analysis.PAPER_FIG3[0] * k + analysis.PAPER_FIG3[1], color=COLORS["paper"], ls=":", lw=1.5, label="paper: t = 2.402 k - 1.181")
     ax.set_xlabel(r"large-granule index $k$")
     ax.set_ylabel("arrival time of the averaged pulse\n" + TIME_LABEL)
