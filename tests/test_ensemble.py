@@ -180,7 +180,10 @@ def _run_to_completion(cmd, cwd):
 
 def _interrupt(store, sig, cwd, min_done=3, timeout=240.0):
     """Start the CLI, wait until ``min_done`` chunks are on disk, send ``sig``; (returncode, stdout, stderr)."""
-    proc = subprocess.Popen(_cli(store), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
+    # A runner that starts us in the background (no job control) makes SIGINT ignored, and
+    # children inherit that; restore the default so Python turns SIGINT into KeyboardInterrupt.
+    proc = subprocess.Popen(_cli(store), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + timeout  # includes interpreter start and loading the Numba cache
         while _done_chunks(store) < min_done:
