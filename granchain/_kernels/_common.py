@@ -192,6 +192,21 @@ def is_finite_window(x, v, hi):
 
 
 @njit(**JIT)
+def initial_records(obs, v, t_grid, peak_v, peak_t, grid_v):
+    """The state at t = 0 is the first peak candidate and fills grid times <= 0; returns the next grid index."""
+    n_obs = obs.shape[0]
+    for q in range(n_obs):
+        peak_v[q] = v[obs[q]]
+        peak_t[q] = 0.0
+    g = 0
+    while g < t_grid.shape[0] and t_grid[g] <= 0.0:
+        for q in range(n_obs):
+            grid_v[g, q] = v[obs[q]]
+        g += 1
+    return g
+
+
+@njit(**JIT)
 def is_new_peak(candidate, current, peak_rtol):
     """Does a local maximum ``candidate`` replace the recorded peak ``current``?
 

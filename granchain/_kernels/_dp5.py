@@ -30,6 +30,7 @@ from ._common import (
     contact_force,
     final_peaks,
     is_new_peak,
+    initial_records,
     initial_window,
     is_finite_window,
     end_of_step,
@@ -242,14 +243,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     n_eval = 1
 
     t = 0.0
-    for q in range(n_obs):
-        peak_v[q] = v[obs[q]]
-        peak_t[q] = 0.0
-    g = 0
-    while g < n_grid and t_grid[g] <= 0.0:
-        for q in range(n_obs):
-            grid_v[g, q] = v[obs[q]]
-        g += 1
+    g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
 
     h = h_fixed if h_fixed > 0.0 else h_init

@@ -20,6 +20,7 @@ from ._common import (
     accelerations,
     advance_window,
     final_peaks,
+    initial_records,
     initial_window,
     is_finite_window,
     is_new_peak,
@@ -54,14 +55,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
     accelerations(x, c, inv_m, n, pw, hi, F, a)
     n_eval = 1
     t = 0.0
-    for q in range(n_obs):
-        peak_v[q] = v[obs[q]]
-        peak_t[q] = 0.0
-    g = 0
-    while g < n_grid and t_grid[g] <= 0.0:
-        for q in range(n_obs):
-            grid_v[g, q] = v[obs[q]]
-        g += 1
+    g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
     exit_since = -1.0
     n_acc = 0
