@@ -24,14 +24,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import __version__
-from ._chain import HERTZ, Chain, sphere_mass, sphere_stiffness
+from ._chain import HERTZ, sphere_mass, sphere_stiffness
 from ._distributions import as_distribution
 from ._effective import effective_parameters
 from ._integrators import DP5
 from ._kernels._common import power_code
 from ._kernels._ensemble import dp5_ensemble
 from ._random import draw_small_radii
-from ._simulate import Status, default_t_max
+from ._simulate import Status, time_limit
 from ._validate import count, exponent, finite_scalar
 
 __all__ = ["EnsembleSpec", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL"]
@@ -163,10 +163,6 @@ def _chain_arrays(spec: EnsembleSpec, kind: str, small: np.ndarray):
     return mu, c_eff, v0, np.arange(G + 1)
 
 
-def _probe_chain(m, c, n, v0) -> Chain:
-    return Chain(m, c, n, v0)
-
-
 def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None) -> dict:
     """Results of chunk j: per-realisation arrays and fixed-point velocity sums.
 
@@ -207,7 +203,7 @@ def _compute_chunk(spec: EnsembleSpec, j: int) -> dict:
     scale = float(2.0**spec.fixed_point_bits)
     for ci, kind in enumerate(spec.chains):
         masses, stiffness, v0, obs = _chain_arrays(spec, kind, small)
-        t_max = max(default_t_max(_probe_chain(masses[0], stiffness[0], spec.n, float(v0.min()))), float(spec.t_grid[-1]))
+        t_max = max(time_limit(masses.shape[1], float(v0.min()), spec.n), float(spec.t_grid[-1]))
         dp5_ensemble(
             masses, stiffness, spec.n, power_code(spec.n), v0, obs, spec.rtol, spec.atol, 1e-3, t_max,
             spec.exit_margin, spec.max_steps, spec.peak_rtol, spec.t_grid, scale, numba.get_num_threads(),
