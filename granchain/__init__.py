@@ -4,38 +4,69 @@ The founding reference is U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg,
 "Pulse propagation in decorated random chains". Rescaled units as in its Sec. II.
 """
 
+from ._version import __version__
 from ._chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered
-from ._distributions import Truncated, Uniform, as_distribution
+from ._distributions import Truncated, Uniform, as_distribution, small_radius_distribution
 from ._effective import effective, effective_parameters
 from ._random import draw_small_radii, random_decorated, realization_rng
+from ._status import Status
 from ._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
-
-__version__ = "0.1.0"
+from ._integrators import DOP853, DP5, INTEGRATORS, Integrator, RunControls, Verlet, get_integrator
+from ._simulate import PulseResult, default_t_max, simulate
+from .families import (
+    FAMILIES,
+    BinaryRandom,
+    ChainFamily,
+    CustomFamily,
+    RandomDecorated,
+    RandomRadii,
+    TaperedDecorated,
+    family_from_record,
+)
+from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, EnsembleSpec, default_time_grid, run_ensemble
 
 __all__ = [
+    "BinaryRandom",
     "Chain",
+    "ChainFamily",
+    "CustomFamily",
+    "DOP853",
+    "DP5",
     "EFFECTIVE_VALIDITY_LIMIT",
+    "ENSEMBLE_ATOL",
+    "ENSEMBLE_RTOL",
     "EffectiveValidityWarning",
+    "EnsembleSpec",
+    "FAMILIES",
+    "INTEGRATORS",
+    "Integrator",
+    "PulseResult",
+    "RandomDecorated",
+    "RandomRadii",
+    "RunControls",
+    "Status",
+    "TaperedDecorated",
     "Truncated",
     "Uniform",
+    "Verlet",
+    "__version__",
     "as_distribution",
     "decorated",
+    "default_t_max",
+    "default_time_grid",
     "draw_small_radii",
     "effective",
     "effective_parameters",
+    "family_from_record",
     "from_radii",
+    "get_integrator",
     "monodisperse",
     "random_decorated",
     "realization_rng",
     "regular_decorated",
+    "run_ensemble",
+    "simulate",
+    "small_radius_distribution",
     "sphere_stiffness",
     "tapered",
 ]
-
-from ._integrators import DOP853, DP5, INTEGRATORS, Verlet, get_integrator  # noqa: E402
-from ._simulate import PulseResult, Status, default_t_max, simulate  # noqa: E402
-
-__all__ += ["DOP853", "DP5", "INTEGRATORS", "PulseResult", "Status", "Verlet", "default_t_max", "get_integrator", "simulate"]
-from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, EnsembleSpec, default_time_grid, run_ensemble  # noqa: E402
-
-__all__ += ["ENSEMBLE_ATOL", "ENSEMBLE_RTOL", "EnsembleSpec", "default_time_grid", "run_ensemble"]

@@ -191,15 +191,32 @@ def tapered(size: int, q: float, *, profile: str = "geometric", n: float = HERTZ
     return from_radii(radii, n=n, initial_velocity=initial_velocity, kind=f"tapered-{profile}")
 
 
-def decorated(small_radii, *, large_radius: float = 1.0, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
-    """N large equal granules with one small granule between each pair (paper Sec. III A).
+def decorated(small_radii, *, large_radius=1.0, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+    """N large granules with one small granule between each pair (paper Sec. III A).
 
     ``small_radii`` (N-1 values, in units of the reference radius) sit between
-    large granules k and k+1. The chain has 2N-1 granules, both ends large, and
-    observes the large granules (0-based indices 0, 2, ..., 2N-2).
+    large granules k and k+1. ``large_radius`` is one radius for all N large
+    granules (the paper's monodisperse case, default 1) or N radii (e.g. a tapered
+    decorated chain, :class:`granchain.TaperedDecorated`). A small granule may not
+    be larger than its smaller neighbour (use :func:`from_radii` for any other
+    chain). The chain has 2N-1 granules, both ends large, and observes the large
+    granules (0-based indices 0, 2, ..., 2N-2).
     """
     s = positive_array("small_radii", small_radii, min_size=1)
-    big = finite_scalar("large_radius", large_radius, positive=True)
+    if np.ndim(large_radius) == 0:
+        big = np.full(s.size + 1, finite_scalar("large_radius", large_radius, positive=True))
+    else:
+        big = positive_array("large_radius", large_radius)
+        if big.size != s.size + 1:
+            raise ValueError(f"large_radius needs one radius per large granule ({s.size + 1} for {s.size} small radii), got {big.size}")
+    too_big = s > np.minimum(big[:-1], big[1:])
+    if too_big.any():
+        j = int(np.flatnonzero(too_big)[0])
+        raise ValueError(
+            f"small_radii[{j}] = {s[j]:g} is larger than its neighbouring large granules "
+            f"({big[j]:g}, {big[j + 1]:g}): a decorated chain needs small granules no larger than the large ones; "
+            "build any other chain with granchain.from_radii"
+        )
     radii = np.empty(2 * s.size + 1)
     radii[0::2] = big
     radii[1::2] = s

@@ -2,7 +2,11 @@
 
 The paper draws the small radii uniformly on [alpha, beta] (Sec. IV, alpha =
 0.01, beta = 0.4) and notes that its results hold for any distribution on which
-the effective description is valid (Sec. V). Two classes cover this:
+the effective description is valid (Sec. V). The same objects serve any random
+radius (e.g. every radius of a polydisperse chain, :class:`granchain.RandomRadii`);
+the small-granule checks (radius <= 1, the effective-validity warning above 0.4)
+are made where radii are used as *small* granules (:func:`small_radius_distribution`:
+decorated families and the BCA). Two classes:
 
 * :class:`Uniform` - the paper's case, with closed forms where the theory has them;
 * :class:`Truncated` - any ``scipy.stats`` continuous distribution truncated to a
@@ -23,7 +27,7 @@ from scipy import integrate
 
 from ._validate import EFFECTIVE_VALIDITY_LIMIT, finite_scalar, warn_effective_validity
 
-__all__ = ["Uniform", "Truncated", "as_distribution"]
+__all__ = ["Uniform", "Truncated", "as_distribution", "distribution_from_record", "small_radius_distribution"]
 
 
 class _Base:
@@ -39,11 +43,6 @@ class _Base:
         """Radii by inverse transform of ``rng.random(size)`` (one uniform per radius)."""
         return self.ppf(rng.random(size))
 
-    def _check_validity(self) -> None:
-        lo, hi = self.support
-        if hi > EFFECTIVE_VALIDITY_LIMIT and float(self.cdf(EFFECTIVE_VALIDITY_LIMIT)) < 1.0:
-            warn_effective_validity(hi, what=f"the small-radius distribution {self.label()}", stacklevel=5)  # caller -> __init__ -> __post_init__ -> here
-
     def key(self) -> str:
         """Canonical string of ``describe()``, for comparing run parameters."""
         return json.dumps(self.describe(), sort_keys=True)
@@ -51,7 +50,7 @@ class _Base:
 
 @dataclass(frozen=True)
 class Uniform(_Base):
-    """Small radii uniform on [alpha, beta], 0 < alpha < beta <= 1 (paper Sec. IV)."""
+    """Radii uniform on [alpha, beta], 0 < alpha < beta (paper Sec. IV; small radii need beta <= 1)."""
 
     alpha: float = 0.01
     beta: float = 0.4
@@ -61,13 +60,10 @@ class Uniform(_Base):
         b = finite_scalar("beta", self.beta)
         if a <= 0.0:
             raise ValueError(f"alpha = {a!r} must be > 0 (a small granule needs a positive radius)")
-        if b > 1.0:
-            raise ValueError(f"beta = {b!r} must be <= 1 (small granules are no larger than the large ones)")
         if a >= b:
             raise ValueError(f"alpha = {a!r} must be < beta = {b!r}")
         object.__setattr__(self, "alpha", a)
         object.__setattr__(self, "beta", b)
-        self._check_validity()
 
     @property
     def support(self) -> tuple[float, float]:
@@ -95,8 +91,8 @@ class Uniform(_Base):
 class Truncated(_Base):
     """A frozen ``scipy.stats`` continuous distribution truncated to [lower, upper].
 
-    ``lower``/``upper`` default to (0, 1) and must lie in [0, 1]; the distribution
-    must put positive probability on the interval. Example::
+    ``lower``/``upper`` default to (0, 1) (``0 <= lower < upper``; small radii need
+    ``upper <= 1``); the distribution must put positive probability on the interval. Example::
 
         Truncated(scipy.stats.beta(2, 8), upper=0.4)
         Truncated(scipy.stats.lognorm(0.5, scale=0.1))
@@ -115,8 +111,8 @@ class Truncated(_Base):
             )
         lo = finite_scalar("lower", self.lower)
         hi = finite_scalar("upper", self.upper)
-        if not (0.0 <= lo < hi <= 1.0):
-            raise ValueError(f"need 0 <= lower < upper <= 1 for small radii, got lower = {lo!r}, upper = {hi!r}")
+        if not (0.0 <= lo < hi):
+            raise ValueError(f"need 0 <= lower < upper for radii, got lower = {lo!r}, upper = {hi!r}")
         f_lo, f_hi = float(self.dist.cdf(lo)), float(self.dist.cdf(hi))
         if not f_hi > f_lo:
             raise ValueError(
@@ -126,8 +122,6 @@ class Truncated(_Base):
         object.__setattr__(self, "lower", lo)
         object.__setattr__(self, "upper", hi)
         object.__setattr__(self, "_mass", (f_lo, f_hi))
-        # Effective support: where the truncated distribution actually has mass.
-        self._check_validity()
 
     def _dist_name(self) -> str:
         return getattr(getattr(self.dist, "dist", None), "name", type(self.dist).__name__)
@@ -189,3 +183,38 @@ def as_distribution(dist=None, *, alpha: float | None = None, beta: float | None
     if isinstance(dist, (Uniform, Truncated)):
         return dist
     return Truncated(dist)
+
+
+def small_radius_distribution(dist=None, *, what: str = "the small-radius distribution", stacklevel: int = 1):
+    """``as_distribution(dist)`` checked for use as *small* radii (decorated chains, the BCA).
+
+    Refuses a support beyond 1 (a "small" granule larger than the large ones) and warns
+    (:class:`granchain.EffectiveValidityWarning`) when it puts mass above 0.4, where the
+    effective description stops being valid (paper Sec. III A). The warning is attributed
+    to the frame ``stacklevel`` levels up (1: the caller of this function).
+    """
+    d = as_distribution(dist)
+    lo, hi = d.support
+    if hi > 1.0:
+        raise ValueError(
+            f"{what} {d.label()} reaches radius {hi:g} > 1: small granules must be no larger than the large "
+            "ones (radii are in units of the large radius); truncate it to <= 1, e.g. Truncated(dist, upper=0.4)"
+        )
+    if hi > EFFECTIVE_VALIDITY_LIMIT and float(d.cdf(EFFECTIVE_VALIDITY_LIMIT)) < 1.0:
+        warn_effective_validity(hi, what=f"{what} {d.label()}", stacklevel=stacklevel + 2)
+    return d
+
+
+def distribution_from_record(record: dict):
+    """The distribution a stored ``describe()`` record names (inverse of ``describe``)."""
+    name = record.get("name", "")
+    if name == "uniform":
+        return Uniform(record["alpha"], record["beta"])
+    if name.startswith("truncated "):
+        from scipy import stats
+
+        dist = getattr(stats, name[len("truncated "):], None)
+        if dist is None:
+            raise ValueError(f"the stored distribution {name!r} is not a scipy.stats distribution here")
+        return Truncated(dist(*record.get("args", ()), **record.get("kwds", {})), record["lower"], record["upper"])
+    raise ValueError(f"cannot rebuild the stored distribution {record!r}")

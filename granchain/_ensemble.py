@@ -1,50 +1,33 @@
-"""``run_ensemble``: many random decorated chains, seeded, parallel, resumable, on disk, on Dask.
+"""``run_ensemble``: many random chains of one family, seeded, parallel, resumable, on disk, on Dask.
 
-Work is split into chunks of realisations. A chunk is computed by the
-compiled ensemble kernel (Numba threads) locally or as a task on a Dask
-cluster, and its results are written into a Zarr store before it counts as
-done: per-realisation variables into their region of the root group, the
-chunk's fixed-point velocity sums and its ``done`` flag into the ``progress``
-group (sums first, flag last; Zarr writes each storage chunk atomically). An
-interrupted run started again with the same arguments skips the done chunks;
-redone chunks overwrite their own slots, so nothing is counted twice and the
-result is bitwise identical to an uninterrupted run.
+An ensemble is a chain family (:mod:`granchain.families`: how realisation i draws its random
+parameters from (seed, i) and becomes a chain) integrated by any registered integrator
+(:mod:`granchain._integrators`, through ``Integrator.integrate_batch``). Work is split into
+chunks of realisations. A chunk is computed locally (Numba threads) or as a task on a Dask
+cluster, and its results are written into the store (:mod:`granchain._store`) before it counts
+as done. An interrupted run started again with the same arguments skips the done chunks;
+redone chunks overwrite their own slots, so nothing is counted twice and the result is
+bitwise identical to an uninterrupted run.
 """
 
 from __future__ import annotations
 
-import datetime as _dt
-import json
 import math
-import os
 import sys
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import __version__
-from ._chain import HERTZ, sphere_mass, sphere_stiffness
-from ._distributions import as_distribution
-from ._effective import effective_parameters
-from ._integrators import DP5
-from ._kernels._common import power_code
-from ._kernels._ensemble import dp5_ensemble
-from ._random import draw_small_radii
-from ._simulate import Status, time_limit
-from ._validate import count, exponent, finite_scalar
+from ._chain import HERTZ
+from ._integrators import DP5, Integrator, RunControls, get_integrator
+from ._simulate import time_limit
+from ._store import MemorySink, ZarrSink
+from ._validate import count
+from ._version import __version__
+from .families import ChainFamily, RandomDecorated
 
-__all__ = ["EnsembleSpec", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL"]
-
-CHAINS = ("decorated", "effective")
-
-
-def _zarr_format() -> dict:
-    """Write Zarr format 2: a stable spec that every Zarr reader understands, with string coordinates
-    (format 3 has no settled string data type yet)."""
-    import zarr
-
-    return {"zarr_format": 2} if int(zarr.__version__.split(".")[0]) >= 3 else {}
+__all__ = ["EnsembleSpec", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
 
 #: Ensemble defaults. Per-realisation peaks stay within ~1e-6 (relative) of
 #: DOP853 at rtol 1e-10: far below the ensemble's statistical error (~1e-3
@@ -53,10 +36,17 @@ ENSEMBLE_RTOL = 1e-6
 ENSEMBLE_ATOL = 1e-9
 
 
-def default_time_grid(n_large: int, dt: float = 0.1) -> np.ndarray:
-    """Grid for <v_k(t)>: to 1.1 x the BCA arrival time at granule N (slope 2.35 per granule) + 10."""
-    t_end = 1.1 * 2.35 * (n_large - 1) + 10.0
-    return np.round(np.arange(0.0, t_end + 0.5 * dt, dt), 12)
+def ensemble_integrator() -> Integrator:
+    """The ensembles' default integrator: DP5 at :data:`ENSEMBLE_RTOL`, :data:`ENSEMBLE_ATOL`."""
+    return DP5(ENSEMBLE_RTOL, ENSEMBLE_ATOL)
+
+
+def default_time_grid(family=26, dt: float = 0.1) -> np.ndarray:
+    """Grid for <v_k(t)> of a family (or of ``RandomDecorated(family)`` for a number N of large
+    granules: to 1.1 x the BCA arrival time at granule N, slope 2.35 per granule, + 10)."""
+    if not isinstance(family, ChainFamily):
+        family = RandomDecorated(family)
+    return family.default_time_grid(dt)
 
 
 def _fixed_point_bits(realizations: int, vmax: float = 2.0) -> int:
@@ -68,48 +58,38 @@ def _fixed_point_bits(realizations: int, vmax: float = 2.0) -> int:
 class EnsembleSpec:
     """Every parameter that determines an ensemble's result (validated)."""
 
-    n_large: int = 26
-    distribution: object = None
+    family: ChainFamily
     realizations: int = 1000
     seed: int = 0
-    chains: tuple = CHAINS
-    n: float = HERTZ
-    rtol: float = ENSEMBLE_RTOL
-    atol: float = ENSEMBLE_ATOL
+    chains: tuple = ("both",)
+    integrator: Integrator = field(default_factory=ensemble_integrator)
     t_grid: np.ndarray = field(default=None, repr=False)
     chunk_size: int = 500
-    momentum_conserving: bool = False
-    exit_margin: float = 3.0
-    peak_rtol: float = 1e-6
-    max_steps: int = 20_000_000
+    controls: RunControls = field(default_factory=RunControls)
 
     def __post_init__(self):
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
-        set_("n_large", count("n_large", self.n_large, minimum=2))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # warned about once, by run_ensemble
-            set_("distribution", as_distribution(self.distribution))
+        if not isinstance(self.family, ChainFamily):
+            raise ValueError(f"family must be a granchain chain family (e.g. granchain.RandomDecorated(26)), got {self.family!r}")
         set_("realizations", count("realizations", self.realizations, minimum=1))
         set_("seed", count("seed", self.seed, minimum=0))
+        known = self.family.chains
         chains = (self.chains,) if isinstance(self.chains, str) else tuple(self.chains)
-        if chains == ("both",):
-            chains = CHAINS
-        if not chains or any(c not in CHAINS for c in chains) or len(set(chains)) != len(chains):
-            raise ValueError(f"chains must be 'decorated', 'effective' or 'both' (or a tuple of those), got {self.chains!r}")
-        set_("chains", tuple(c for c in CHAINS if c in chains))
-        set_("n", exponent(self.n))
-        DP5(self.rtol, self.atol)  # validates the tolerances
-        set_("rtol", float(self.rtol))
-        set_("atol", float(self.atol))
-        grid = default_time_grid(self.n_large) if self.t_grid is None else np.asarray(self.t_grid, dtype=float).reshape(-1)
+        if chains in (("both",), ("all",)):
+            chains = known
+        if not chains or any(c not in known for c in chains) or len(set(chains)) != len(chains):
+            raise ValueError(f"chains must be one or more of {list(known)} (or 'both'), got {self.chains!r}")
+        set_("chains", tuple(c for c in known if c in chains))
+        set_("integrator", get_integrator(self.integrator))
+        grid = self.family.default_time_grid() if self.t_grid is None else np.asarray(self.t_grid, dtype=float).reshape(-1)
         if grid.size == 0 or not np.all(np.isfinite(grid)) or grid[0] < 0 or np.any(np.diff(grid) <= 0):
             raise ValueError("t_grid must be a non-empty, finite, increasing array of times >= 0")
+        grid = np.array(grid)
         grid.setflags(write=False)
         set_("t_grid", grid)
         set_("chunk_size", count("chunk_size", self.chunk_size, minimum=1))
-        set_("exit_margin", finite_scalar("exit_margin", self.exit_margin))
-        set_("peak_rtol", finite_scalar("peak_rtol", self.peak_rtol))
-        set_("max_steps", count("max_steps", self.max_steps, minimum=1))
+        if not isinstance(self.controls, RunControls):
+            raise ValueError(f"controls must be a granchain.RunControls, got {self.controls!r}")
 
     @property
     def n_chunks(self) -> int:
@@ -125,46 +105,24 @@ class EnsembleSpec:
     def describe(self) -> dict:
         """JSON-able record of the parameters (stored with the results, compared on resume)."""
         return {
-            "n_large": self.n_large,
-            "distribution": self.distribution.describe(),
+            "family": self.family.describe(),
             "realizations": self.realizations,
             "seed": self.seed,
             "chains": list(self.chains),
-            "n": self.n,
-            "integrator": "dp5",
-            "rtol": self.rtol,
-            "atol": self.atol,
+            "integrator": self.integrator.describe(),
             "t_grid": {"start": float(self.t_grid[0]), "stop": float(self.t_grid[-1]), "size": int(self.t_grid.size),
                        "checksum": float(np.sum(self.t_grid * np.arange(1, self.t_grid.size + 1)))},
             "chunk_size": self.chunk_size,
-            "momentum_conserving": self.momentum_conserving,
-            "exit_margin": self.exit_margin,
-            "peak_rtol": self.peak_rtol,
-            "max_steps": self.max_steps,
+            "exit_margin": self.controls.exit_margin,
+            "peak_rtol": self.controls.peak_rtol,
+            "max_steps": self.controls.max_steps,
             "granchain_version": __version__,
         }
 
 
 # --------------------------------------------------------------------------- compute
-def _chain_arrays(spec: EnsembleSpec, kind: str, small: np.ndarray):
-    """Masses, stiffnesses (R, M), initial velocities (R,) and observed indices of a batch.
-
-    The same functions ``decorated``/``effective`` use, applied along the last axis, so
-    each row is bitwise the chain ``simulate`` users build for that realisation.
-    """
-    R, G = small.shape
-    if kind == "decorated":
-        radii = np.ones((R, 2 * G + 1))
-        radii[:, 1::2] = small
-        v0 = np.ones(R)
-        return sphere_mass(radii), sphere_stiffness(radii), v0, np.arange(0, 2 * G + 1, 2)
-    mu, c_eff = effective_parameters(np.ones((R, G + 1)), small, spec.n)
-    v0 = 1.0 / mu[:, 0] if spec.momentum_conserving else np.ones(R)  # m_1 v_1 / mu_1 with m_1 = v_1 = 1
-    return mu, c_eff, v0, np.arange(G + 1)
-
-
 def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None) -> dict:
-    """Results of chunk j: per-realisation arrays and fixed-point velocity sums.
+    """Results of chunk j: the family's random parameters, per-realisation results and fixed-point sums.
 
     A top-level function so that Dask can ship it to workers.
     """
@@ -180,263 +138,40 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None) -> dic
 
 
 def _compute_chunk(spec: EnsembleSpec, j: int) -> dict:
-    import numba
-
     sl = spec.chunk_slice(j)
     idx = np.arange(sl.start, sl.stop)
-    small = draw_small_radii(spec.distribution, spec.n_large - 1, spec.seed, idx)
-    R, N, T = idx.size, spec.n_large, spec.t_grid.size
-    nc = len(spec.chains)
+    family = spec.family
+    params = family.draw_batch(spec.seed, idx)
+    R, K, T, nc = idx.size, family.n_observed, spec.t_grid.size, len(spec.chains)
     out = {
         "chunk": j,
-        "small_radius": small,
-        "peak_velocity": np.zeros((nc, R, N)),
-        "peak_time": np.zeros((nc, R, N)),
+        "realizations": R,
+        **params,
+        "peak_velocity": np.zeros((nc, R, K)),
+        "peak_time": np.zeros((nc, R, K)),
         "status": np.zeros((nc, R), dtype=np.int64),
         "energy_error": np.zeros((nc, R)),
         "n_steps": np.zeros((nc, R), dtype=np.int64),
         "t_end": np.zeros((nc, R)),
-        "sum_v": np.zeros((nc, T, N), dtype=np.int64),  # time-major in the kernel
-        "sum_v2": np.zeros((nc, T, N), dtype=np.int64),
+        "sum_v": np.zeros((nc, T, K), dtype=np.int64),  # time-major in the kernels
+        "sum_v2": np.zeros((nc, T, K), dtype=np.int64),
         "n_valid": np.zeros((nc, 1), dtype=np.int64),
     }
     scale = float(2.0**spec.fixed_point_bits)
-    for ci, kind in enumerate(spec.chains):
-        masses, stiffness, v0, obs = _chain_arrays(spec, kind, small)
-        t_max = max(time_limit(masses.shape[1], float(v0.min()), spec.n), float(spec.t_grid[-1]))
-        dp5_ensemble(
-            masses, stiffness, spec.n, power_code(spec.n), v0, obs, spec.rtol, spec.atol, 1e-3, t_max,
-            spec.exit_margin, spec.max_steps, spec.peak_rtol, spec.t_grid, scale, numba.get_num_threads(),
-            out["peak_velocity"][ci], out["peak_time"][ci], out["status"][ci], out["energy_error"][ci],
-            out["n_steps"][ci], out["t_end"][ci], out["sum_v"][ci], out["sum_v2"][ci], out["n_valid"][ci],
+    per_chain = ("peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end", "sum_v", "sum_v2", "n_valid")
+    for ci, name in enumerate(spec.chains):
+        batch = family.build(params, name)
+        masses = np.ascontiguousarray(batch.masses, dtype=float)
+        v0 = np.ascontiguousarray(batch.initial_velocity, dtype=float)
+        t_max = max(time_limit(masses.shape[1], float(v0.min()), batch.n), float(spec.t_grid[-1]))
+        spec.integrator.integrate_batch(
+            masses, np.ascontiguousarray(batch.stiffness, dtype=float), batch.n, v0,
+            np.ascontiguousarray(batch.observed, dtype=np.int64), t_grid=spec.t_grid, t_max=t_max, controls=spec.controls,
+            scale=scale, out={k: out[k][ci] for k in per_chain},
         )
     out["sum_v"] = np.ascontiguousarray(out["sum_v"].transpose(0, 2, 1))  # (chain, granule, time)
     out["sum_v2"] = np.ascontiguousarray(out["sum_v2"].transpose(0, 2, 1))
     return out
-
-
-# --------------------------------------------------------------------------- dataset and store
-_UNITS_V = "V_1 (velocity of the struck granule; rescaled, paper Sec. II)"
-_UNITS_T = "rescaled time (paper Sec. II)"
-
-
-def _attrs(spec: EnsembleSpec) -> dict:
-    d = spec.describe()
-    attrs = {
-        "title": "granchain ensemble of random decorated chains (Harbola, Rosas, Romero, Lindenberg)",
-        "granchain_parameters": json.dumps(d, sort_keys=True),
-        "granchain_version": __version__,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "n_large": spec.n_large,
-        "realizations": spec.realizations,
-        "seed": spec.seed,
-        "n": spec.n,
-        "distribution": spec.distribution.label(),
-        "integrator": "dp5",
-        "rtol": spec.rtol,
-        "atol": spec.atol,
-        "chunk_size": spec.chunk_size,
-        "momentum_conserving": int(spec.momentum_conserving),
-        "exit_margin": spec.exit_margin,
-        "peak_rtol": spec.peak_rtol,
-        "fixed_point_bits": spec.fixed_point_bits,
-        "status_codes": "; ".join(f"{int(s)} = {s.name}: {s.message}" for s in Status),
-    }
-    for key in ("alpha", "beta"):
-        if key in d["distribution"]:
-            attrs[key] = d["distribution"][key]
-    return attrs
-
-
-def _empty_dataset(spec: EnsembleSpec, lazy: bool):
-    """The result Dataset with every variable at full size, filled with missing values."""
-    import xarray as xr
-
-    zeros = np.full
-    if lazy:
-        import dask.array as da
-
-        zeros = lambda shape, fill, dtype=float: da.full(shape, fill, dtype=dtype, chunks=_storage_chunks(spec, shape))  # noqa: E731
-    R, N, T, C = spec.realizations, spec.n_large, spec.t_grid.size, len(spec.chains)
-    var = lambda dims, shape, fill, dtype, **attrs: (dims, zeros(shape, fill, dtype=dtype), attrs)  # noqa: E731
-    ds = xr.Dataset(
-        {
-            "small_radius": var(("realization", "gap"), (R, N - 1), np.nan, float, units="R_1 (large-granule radius)",
-                                long_name="radius of the small granule between large granules j and j+1"),
-            "peak_velocity": var(("chain", "realization", "granule"), (C, R, N), np.nan, float, units=_UNITS_V,
-                                 long_name="maximum velocity of large granule k in the realisation"),
-            "peak_time": var(("chain", "realization", "granule"), (C, R, N), np.nan, float, units=_UNITS_T,
-                             long_name="time of the maximum velocity of large granule k (arrival time)"),
-            "status": var(("chain", "realization"), (C, R), -1, np.int8, units="1",
-                          long_name="integration status (0 = success; -1 = not computed)", flag_meanings=" ".join(s.name for s in Status)),
-            "energy_error": var(("chain", "realization"), (C, R), np.nan, float, units="1", long_name="relative energy drift (E_end - E_0)/E_0"),
-            "n_steps": var(("chain", "realization"), (C, R), -1, np.int64, units="1", long_name="accepted integration steps"),
-            "t_end": var(("chain", "realization"), (C, R), np.nan, float, units=_UNITS_T, long_name="time the integration stopped"),
-            "mean_velocity": var(("chain", "granule", "time"), (C, N, T), np.nan, float, units=_UNITS_V,
-                                 long_name="ensemble-averaged velocity <v_k(t)> of large granule k over successful realisations"),
-            "mean_velocity_stderr": var(("chain", "granule", "time"), (C, N, T), np.nan, float, units=_UNITS_V,
-                                        long_name="standard error of <v_k(t)>"),
-            "n_valid": var(("chain",), (C,), 0, np.int64, units="1", long_name="successful realisations in mean_velocity"),
-        },
-        coords={
-            "chain": ("chain", np.array(spec.chains, dtype=object).astype(str), {"long_name": "decorated chain or its effective chain"}),
-            "realization": ("realization", np.arange(R), {"long_name": "realisation index i (radii from SeedSequence(seed, spawn_key=(i,)))"}),
-            "granule": ("granule", np.arange(1, N + 1), {"long_name": "large-granule index k (decorated index 2k-1)"}),
-            "gap": ("gap", np.arange(1, N), {"long_name": "small-granule index j (between large granules j and j+1)"}),
-            "time": ("time", np.asarray(spec.t_grid), {"units": _UNITS_T, "long_name": "time"}),
-        },
-        attrs=_attrs(spec),
-    )
-    return ds
-
-
-def _storage_chunks(spec: EnsembleSpec, shape) -> tuple:
-    """Zarr storage chunks: one run-chunk of realisations per storage chunk."""
-    R = spec.realizations
-    return tuple(min(spec.chunk_size, R) if s == R else s for s in shape)
-
-
-def _progress_dataset(spec: EnsembleSpec):
-    """The ``progress`` group (all zeros) and its encoding."""
-    import xarray as xr
-
-    C, N, T, J = len(spec.chains), spec.n_large, spec.t_grid.size, spec.n_chunks
-    ds = xr.Dataset(
-        {
-            "sum_v": (("chunk", "chain", "granule", "time"), np.zeros((J, C, N, T), dtype=np.int64)),
-            "sum_v2": (("chunk", "chain", "granule", "time"), np.zeros((J, C, N, T), dtype=np.int64)),
-            "n_valid": (("chunk", "chain"), np.zeros((J, C), dtype=np.int64)),
-            "done": (("chunk",), np.zeros(J, dtype=np.int8)),
-        },
-        attrs={"granchain_parameters": json.dumps(spec.describe(), sort_keys=True),
-               "about": "bookkeeping of granchain.run_ensemble: fixed-point velocity sums per chunk and done flags"},
-    )
-    # One storage chunk per run chunk: each chunk's sums and flag are files of their own.
-    encoding = {"sum_v": {"chunks": (1, C, N, T)}, "sum_v2": {"chunks": (1, C, N, T)}, "n_valid": {"chunks": (1, C)}, "done": {"chunks": (1,)}}
-    return ds, encoding
-
-
-def _chunk_dataset(spec: EnsembleSpec, res: dict):
-    import xarray as xr
-
-    return xr.Dataset(
-        {
-            "small_radius": (("realization", "gap"), res["small_radius"]),
-            "peak_velocity": (("chain", "realization", "granule"), res["peak_velocity"]),
-            "peak_time": (("chain", "realization", "granule"), res["peak_time"]),
-            "status": (("chain", "realization"), res["status"].astype(np.int8)),
-            "energy_error": (("chain", "realization"), res["energy_error"]),
-            "n_steps": (("chain", "realization"), res["n_steps"]),
-            "t_end": (("chain", "realization"), res["t_end"]),
-        }
-    )
-
-
-def _finalize(ds, spec: EnsembleSpec, sum_v, sum_v2, n_valid):
-    """mean_velocity and its standard error from the exact fixed-point sums."""
-    scale = 2.0**spec.fixed_point_bits
-    nv = n_valid.astype(float)[:, None, None]
-    s1 = sum_v.astype(float) / scale
-    s2 = sum_v2.astype(float) / scale
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = s1 / nv
-        var = np.maximum(s2 - s1 * mean, 0.0) / (nv - 1.0)
-        stderr = np.sqrt(var / nv)
-    ds["mean_velocity"].values = np.where(nv > 0, mean, np.nan)
-    ds["mean_velocity_stderr"].values = np.where(nv > 1, stderr, np.nan)
-    ds["n_valid"].values = n_valid.astype(np.int64)
-    return ds
-
-
-class _MemorySink:
-    """Results kept in memory (no ``out`` path): nothing to resume."""
-
-    def __init__(self, spec: EnsembleSpec):
-        self.spec = spec
-        self.ds = _empty_dataset(spec, lazy=False)
-        shape = (spec.n_chunks, len(spec.chains), spec.n_large, spec.t_grid.size)
-        self.sum_v = np.zeros(shape, dtype=np.int64)
-        self.sum_v2 = np.zeros(shape, dtype=np.int64)
-        self.n_valid = np.zeros((spec.n_chunks, len(spec.chains)), dtype=np.int64)
-
-    def pending(self) -> list[int]:
-        return list(range(self.spec.n_chunks))
-
-    def write(self, res: dict) -> None:
-        j = res["chunk"]
-        sl = self.spec.chunk_slice(j)
-        for name, values in _chunk_dataset(self.spec, res).data_vars.items():
-            self.ds[name][{"realization": sl}] = values
-        self.sum_v[j], self.sum_v2[j], self.n_valid[j] = res["sum_v"], res["sum_v2"], res["n_valid"][:, 0]
-
-    def finalize(self):
-        return _finalize(self.ds, self.spec, self.sum_v.sum(0), self.sum_v2.sum(0), self.n_valid.sum(0))
-
-
-class _ZarrSink:
-    """Results in a Zarr store at ``path``; finished chunks survive any interruption."""
-
-    def __init__(self, spec: EnsembleSpec, path, resume: bool):
-        import xarray as xr
-
-        self.spec, self.path = spec, os.fspath(path)
-        if os.path.exists(self.path):
-            if not resume:
-                raise ValueError(f"{self.path} already exists: pass resume=True (CLI: --resume) to continue it, or choose another path")
-            try:
-                stored = xr.open_zarr(self.path, group="progress").attrs.get("granchain_parameters")
-            except Exception as exc:  # not a Zarr store, or not ours
-                raise ValueError(f"{self.path} exists but is not a granchain ensemble store ({exc}); choose another path") from None
-            _check_same_parameters(self.path, stored, spec)
-        else:
-            _empty_dataset(spec, lazy=True).to_zarr(self.path, mode="w-", compute=False, **_zarr_format())
-            progress, encoding = _progress_dataset(spec)
-            progress.to_zarr(self.path, group="progress", mode="a", encoding=encoding, **_zarr_format())
-
-    def _progress(self):
-        import xarray as xr
-
-        return xr.open_zarr(self.path, group="progress", consolidated=False)
-
-    def pending(self) -> list[int]:
-        done = self._progress()["done"].values
-        return [j for j in range(self.spec.n_chunks) if not done[j]]
-
-    def write(self, res: dict) -> None:
-        import xarray as xr
-
-        j = res["chunk"]
-        _chunk_dataset(self.spec, res).to_zarr(self.path, region={"realization": self.spec.chunk_slice(j)}, mode="r+", **_zarr_format())
-        region = {"chunk": slice(j, j + 1)}
-        sums = xr.Dataset({
-            "sum_v": (("chunk", "chain", "granule", "time"), res["sum_v"][None]),
-            "sum_v2": (("chunk", "chain", "granule", "time"), res["sum_v2"][None]),
-            "n_valid": (("chunk", "chain"), res["n_valid"].T),
-        })
-        sums.to_zarr(self.path, group="progress", region=region, mode="r+", consolidated=False, **_zarr_format())
-        # The flag last: a chunk counts as done only once all its data are on disk.
-        xr.Dataset({"done": (("chunk",), np.ones(1, dtype=np.int8))}).to_zarr(
-            self.path, group="progress", region=region, mode="r+", consolidated=False, **_zarr_format())
-
-    def finalize(self):
-        import xarray as xr
-
-        prog = self._progress().load()
-        ds = xr.open_zarr(self.path).load()
-        ds = _finalize(ds, self.spec, prog["sum_v"].values.sum(0), prog["sum_v2"].values.sum(0), prog["n_valid"].values.sum(0))
-        ds[["mean_velocity", "mean_velocity_stderr", "n_valid"]].to_zarr(
-            self.path, region={"chain": slice(None), "granule": slice(None), "time": slice(None)}, mode="r+", **_zarr_format())
-        return ds
-
-
-def _check_same_parameters(path, stored: str | None, spec: EnsembleSpec) -> None:
-    if stored is None:
-        raise ValueError(f"{path} is not a granchain ensemble store (no granchain_parameters); choose another path")
-    old, new = json.loads(stored), json.loads(json.dumps(spec.describe(), sort_keys=True))
-    if old != new:
-        diff = ", ".join(f"{k}: stored {old.get(k)!r}, asked {new.get(k)!r}" for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k))
-        raise ValueError(f"{path} was written with different parameters ({diff}); "
-                         "results are never mixed: use another path, or the stored parameters to resume")
 
 
 def _dask_chunk(spec: EnsembleSpec, j: int) -> dict:
@@ -450,26 +185,65 @@ def _dask_chunk(spec: EnsembleSpec, j: int) -> dict:
     return compute_chunk(spec, j, threads=threads)
 
 
-def run_ensemble(n_large: int = 26, distribution=None, realizations: int = 1000, seed: int = 0, chains="both", *,
-                 n: float = HERTZ, rtol: float = ENSEMBLE_RTOL, atol: float = ENSEMBLE_ATOL, t_grid=None,
+_SUGAR_DEFAULTS = {"distribution": None, "n": HERTZ, "momentum_conserving": False}
+
+
+def _family_of(family, distribution, n, momentum_conserving) -> ChainFamily:
+    """``family`` itself, or ``RandomDecorated`` for the old call ``run_ensemble(n_large, distribution, ...)``."""
+    given = {"distribution": distribution, "n": n, "momentum_conserving": momentum_conserving}
+    if isinstance(family, ChainFamily):
+        extra = [k for k, v in given.items() if v is not _SUGAR_DEFAULTS[k] and v != _SUGAR_DEFAULTS[k]]
+        if extra:
+            raise ValueError(f"{', '.join(extra)} belong to the family when one is given: e.g. "
+                             f"run_ensemble(RandomDecorated(26, distribution, n=2.5, momentum_conserving=False), ...)")
+        return family
+    if isinstance(family, (int, np.integer)) and not isinstance(family, bool):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fam = RandomDecorated(family, distribution, n=n, momentum_conserving=momentum_conserving)
+        for w in caught:  # re-issued at the caller of run_ensemble
+            warnings.warn(w.message, w.category, stacklevel=4)
+        return fam
+    raise ValueError(f"family must be a chain family (granchain.RandomDecorated(26), RandomRadii(...), ...) "
+                     f"or a number N of large granules, got {family!r}")
+
+
+def _integrator_of(integrator, rtol, atol) -> Integrator:
+    if integrator is None:
+        return DP5(ENSEMBLE_RTOL if rtol is None else rtol, ENSEMBLE_ATOL if atol is None else atol)
+    if rtol is not None or atol is not None:
+        raise ValueError("rtol/atol set the default DP5; with integrator= set them on the integrator, e.g. DP5(rtol=1e-7)")
+    return get_integrator(integrator)
+
+
+def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: int = 0, chains="both", *,
+                 integrator=None, n: float = HERTZ, rtol: float | None = None, atol: float | None = None, t_grid=None,
                  chunk_size: int = 500, out=None, resume: bool = True, client=None, progress: bool = True,
-                 momentum_conserving: bool = False, exit_margin: float = 3.0, peak_rtol: float = 1e-6, threads: int | None = None):
-    """Integrate ``realizations`` random decorated chains (and/or their effective chains).
+                 momentum_conserving: bool = False, exit_margin: float = 3.0, peak_rtol: float = 1e-6,
+                 max_steps: int = 20_000_000, threads: int | None = None, n_large: int | None = None):
+    """Integrate ``realizations`` random chains of a family, with any registered integrator.
 
     Parameters
     ----------
-    n_large : int
-        N, large granules per chain (2N-1 granules in the decorated chain).
-    distribution : granchain.Uniform | granchain.Truncated | scipy.stats frozen, optional
-        Small radii (default: the paper's U[0.01, 0.4]).
+    family : ChainFamily or int
+        The chain family (:class:`granchain.RandomDecorated`, :class:`granchain.TaperedDecorated`,
+        :class:`granchain.RandomRadii`, :class:`granchain.BinaryRandom`,
+        :class:`granchain.CustomFamily`). A number N is the paper's chain,
+        ``RandomDecorated(N, distribution, n=n, momentum_conserving=momentum_conserving)``.
+    distribution, n, momentum_conserving
+        Only with a number N (otherwise they belong to the family).
+    n_large : int, optional
+        The name of the first argument before granchain 0.2 (``run_ensemble(n_large=26)``), still accepted.
     realizations, seed : int
-        Realisation i draws its radii from SeedSequence(seed, spawn_key=(i,)).
-    chains : "decorated", "effective" or "both"
-        Which chains to integrate for the same realisations (paired).
-    rtol, atol : float
-        DP5 tolerances (defaults: :data:`ENSEMBLE_RTOL`, :data:`ENSEMBLE_ATOL`).
+        Realisation i draws its random parameters from SeedSequence(seed, spawn_key=(i,)).
+    chains : str or tuple
+        Which of the family's chains to integrate for the same realisations (paired):
+        "decorated", "effective" or "both" for decorated families; the family's one chain otherwise.
+    integrator : DP5 | Verlet | DOP853 | str, optional
+        Any registered integrator (default: DP5 at :data:`ENSEMBLE_RTOL`, :data:`ENSEMBLE_ATOL`,
+        or at ``rtol``/``atol`` if given). DOP853 runs realisation by realisation in Python (slow).
     t_grid : array, optional
-        Times of the averaged pulse <v_k(t)> (default :func:`default_time_grid`).
+        Times of the averaged pulse <v_k(t)> (default: the family's ``default_time_grid()``).
     chunk_size : int
         Realisations per chunk: the unit of work, of saving and of resuming.
     out : path, optional
@@ -481,37 +255,42 @@ def run_ensemble(n_large: int = 26, distribution=None, realizations: int = 1000,
         Run the chunks as tasks on this cluster (results are identical).
     progress : bool
         Progress bar with realisations/s and ETA on stderr.
+    exit_margin, peak_rtol, max_steps
+        Run controls, as in :func:`granchain.simulate` (:class:`granchain.RunControls`).
     threads : int, optional
         Numba threads for local runs (default: all cores).
 
     Returns
     -------
-    xarray.Dataset with dims chain, realization, granule, gap, time (see README).
+    xarray.Dataset with dims chain, realization, granule (the family's observed granules),
+    time and the family's parameter dims (see README).
     """
-    as_distribution(distribution)  # warns once if the distribution leaves the effective description's validity
-    spec = EnsembleSpec(n_large, distribution, realizations, seed, chains, n, rtol, atol, t_grid, chunk_size,
-                        momentum_conserving, exit_margin, peak_rtol)
-    sink = _MemorySink(spec) if out is None else _ZarrSink(spec, out, resume)
+    if n_large is not None:
+        family = n_large
+    fam = _family_of(family, distribution, n, momentum_conserving)
+    spec = EnsembleSpec(fam, realizations, seed, chains, _integrator_of(integrator, rtol, atol), t_grid, chunk_size,
+                        RunControls(exit_margin, max_steps, peak_rtol))
+    sink = MemorySink(spec) if out is None else ZarrSink(spec, out, resume)
     pending = sink.pending()
     done_realizations = spec.realizations - sum(spec.chunk_slice(j).stop - spec.chunk_slice(j).start for j in pending)
     from tqdm.auto import tqdm
 
     bar = tqdm(total=spec.realizations, initial=done_realizations, unit=" realisations", disable=not progress, smoothing=0.05,
-               desc=f"N={spec.n_large} {'+'.join(spec.chains)}", dynamic_ncols=True)
+               desc=f"{fam.kind} {'+'.join(spec.chains)}", dynamic_ncols=True)
     futures = []
     try:
         if client is None:
             for j in pending:
                 res = compute_chunk(spec, j, threads=threads)
                 sink.write(res)
-                bar.update(res["small_radius"].shape[0])
+                bar.update(res["realizations"])
         else:
             from distributed import as_completed
 
             futures = [client.submit(_dask_chunk, spec, j, pure=False) for j in pending]
             for fut, res in as_completed(futures, with_results=True):
                 sink.write(res)
-                bar.update(res["small_radius"].shape[0])
+                bar.update(res["realizations"])
                 fut.release()
     except KeyboardInterrupt:
         if futures:

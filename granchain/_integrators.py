@@ -3,23 +3,32 @@
 Each declares its ``name`` and convergence ``order``; the test-suite loops over
 :data:`INTEGRATORS` and measures every order. All share one contract: integrate
 a :class:`~granchain.Chain` from its initial state, record the peaks of the
-observed granules between steps and, on request, their velocities on a grid.
+observed granules between steps and, on request, their velocities on a grid
+(:meth:`Integrator.integrate`), and do the same for a batch of chains of one size
+with the ensemble's fixed-point sums (:meth:`Integrator.integrate_batch`). That is
+the one seam through which ``simulate`` and ``run_ensemble`` reach any integrator.
+
+Compiled integrators (DP5, Verlet) name a Numba kernel by id and pack their settings
+into a float64 array; both paths then run the same compiled code
+(``granchain._kernels._dispatch``). A pure-Python integrator (DOP853) gets a batch
+loop for free, with the same fixed-point accumulation.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from ._kernels._common import power_code
-from ._kernels._dp5 import dp5_integrate
-from ._kernels._verlet import verlet_integrate
+from ._kernels._common import INFO_SIZE, INFO_STEPS, INFO_T_END, power_code, total_energy
+from ._kernels._dispatch import KERNEL_DP5, KERNEL_VERLET, integrate_chain
+from ._kernels._ensemble import accumulate_fixed_point, integrate_batch
 from ._reference import dop853_integrate
-from ._validate import finite_scalar
+from ._validate import count, finite_scalar
 
-__all__ = ["DP5", "Verlet", "DOP853", "INTEGRATORS", "get_integrator"]
+__all__ = ["Integrator", "DP5", "Verlet", "DOP853", "INTEGRATORS", "RunControls", "get_integrator"]
 
 
 def _tolerances(rtol, atol):
@@ -31,7 +40,113 @@ def _tolerances(rtol, atol):
 
 
 @dataclass(frozen=True)
-class DP5:
+class RunControls:
+    """When a run stops and how peaks are recorded; the same checks for ``simulate`` and ensembles.
+
+    exit_margin : float >= 0
+        Time units the run goes on after the pulse has left the last granule.
+    max_steps : int >= 1
+        Step budget (accepted + rejected) of one integration; status MAX_STEPS when exhausted.
+    peak_rtol : float >= 0
+        Tie rule for peaks: a later local maximum replaces the recorded one only if higher
+        by more than this relative amount (keep it above the integration error).
+    """
+
+    exit_margin: float = 3.0
+    max_steps: int = 20_000_000
+    peak_rtol: float = 1e-6
+
+    def __post_init__(self):
+        for name in ("exit_margin", "peak_rtol"):
+            value = finite_scalar(name, getattr(self, name))
+            if value < 0:
+                raise ValueError(f"{name} must be >= 0, got {value!r}")
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "max_steps", count("max_steps", self.max_steps, minimum=1))
+
+
+def _outputs(n_observed: int, n_grid: int):
+    # velocities time-major: one contiguous row per grid time
+    return np.zeros(n_observed), np.zeros(n_observed), np.zeros((n_grid, n_observed)), np.zeros(INFO_SIZE)
+
+
+class Integrator:
+    """Base of every integrator: a frozen dataclass of settings with a ``name`` and an ``order``."""
+
+    name: ClassVar[str]
+    order: ClassVar[int]
+
+    def describe(self) -> dict:
+        """JSON-able record of the integrator and all its settings (stored with ensembles)."""
+        return {"name": self.name, **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)}}
+
+    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
+        """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state).
+
+        Returns (status, info, peak_v, peak_t, grid_v), see ``granchain._kernels._dispatch``.
+        """
+        raise NotImplementedError
+
+    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, *, t_grid, t_max, controls: RunControls,
+                        scale: float, out: dict) -> None:
+        """Integrate a batch of chains (rows of ``masses`` (R, M), ``stiffness`` (R, M-1),
+        ``initial_velocity`` (R,), shared ``observed``), stopping at the pulse's exit.
+
+        Writes ``out["peak_velocity"]``/``["peak_time"]`` (R, K), ``["status"]``,
+        ``["energy_error"]``, ``["n_steps"]``, ``["t_end"]`` (R,), adds the fixed-point
+        sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) and
+        counts them in ``["n_valid"]`` (1,). This generic version loops in Python over
+        :meth:`integrate`; compiled integrators override it with a parallel kernel.
+        """
+        from ._chain import Chain
+
+        R, M = masses.shape
+        for r in range(R):
+            chain = Chain(masses[r], stiffness[r], n, initial_velocity[r], observed)
+            x, v = np.zeros(M), np.zeros(M)
+            v[0] = initial_velocity[r]
+            st, info, peak_v, peak_t, grid_v = self.integrate(chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=True,
+                                                              controls=controls)
+            out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
+            out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]
+            e0 = 0.5 * masses[r, 0] * initial_velocity[r] * initial_velocity[r]  # the expression of the compiled batch
+            out["energy_error"][r] = (total_energy(x, v, masses[r], stiffness[r], n) - e0) / e0
+            if st == 0:
+                out["n_valid"][0] += 1
+                accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])
+
+
+class _Compiled(Integrator):
+    """An integrator with a Numba kernel (``kernel_id``) and settings packed by ``kernel_params``."""
+
+    kernel_id: ClassVar[int]
+
+    def kernel_params(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
+        peak_v, peak_t, grid_v, info = _outputs(chain.observed.size, t_grid.size)
+        status = integrate_chain(
+            self.kernel_id, self.kernel_params(), chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.observed,
+            t_max, stop_at_exit, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, x, v,
+            peak_v, peak_t, grid_v, info,
+        )
+        return int(status), info, peak_v, peak_t, grid_v
+
+    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, *, t_grid, t_max, controls: RunControls,
+                        scale: float, out: dict) -> None:
+        import numba
+
+        integrate_batch(
+            self.kernel_id, self.kernel_params(), masses, stiffness, n, power_code(n), initial_velocity, observed, t_max,
+            controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, scale, numba.get_num_threads(),
+            out["peak_velocity"], out["peak_time"], out["status"], out["energy_error"], out["n_steps"], out["t_end"],
+            out["sum_v"], out["sum_v2"], out["n_valid"],
+        )
+
+
+@dataclass(frozen=True)
+class DP5(_Compiled):
     """Compiled adaptive Dormand-Prince 5(4), PI step control, max-norm error (the default).
 
     ``fixed_step`` switches step control off (used to measure the order).
@@ -46,49 +161,41 @@ class DP5:
 
     name: ClassVar[str] = "dp5"
     order: ClassVar[int] = 5
+    kernel_id: ClassVar[int] = KERNEL_DP5
 
     def __post_init__(self):
         rtol, atol = _tolerances(self.rtol, self.atol)
         object.__setattr__(self, "rtol", rtol)
         object.__setattr__(self, "atol", atol)
-        finite_scalar("first_step", self.first_step, positive=True)
+        object.__setattr__(self, "first_step", finite_scalar("first_step", self.first_step, positive=True))
         if self.fixed_step is not None:
-            finite_scalar("fixed_step", self.fixed_step, positive=True)
+            object.__setattr__(self, "fixed_step", finite_scalar("fixed_step", self.fixed_step, positive=True))
 
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol):
-        peak_v, peak_t, grid_v, info = _outputs(chain, t_grid)
-        status = dp5_integrate(
-            chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.observed,
-            self.rtol, self.atol, self.first_step, self.fixed_step or 0.0, t_max, stop_at_exit,
-            exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, info,
-        )
-        return int(status), info, peak_v, peak_t, grid_v
+    def kernel_params(self) -> np.ndarray:
+        return np.array([self.rtol, self.atol, self.first_step, self.fixed_step or 0.0])
 
 
 @dataclass(frozen=True)
-class Verlet:
+class Verlet(_Compiled):
     """Compiled fixed-step velocity Verlet (symplectic, order 2)."""
 
     dt: float = 1e-3
 
     name: ClassVar[str] = "verlet"
     order: ClassVar[int] = 2
+    kernel_id: ClassVar[int] = KERNEL_VERLET
 
     def __post_init__(self):
         object.__setattr__(self, "dt", finite_scalar("dt", self.dt, positive=True))
 
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol):
-        peak_v, peak_t, grid_v, info = _outputs(chain, t_grid)
-        status = verlet_integrate(
-            chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.observed,
-            self.dt, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, info,
-        )
-        return int(status), info, peak_v, peak_t, grid_v
+    def kernel_params(self) -> np.ndarray:
+        return np.array([self.dt])
 
 
 @dataclass(frozen=True)
-class DOP853:
-    """SciPy's DOP853 (order 8), the independent high-accuracy reference. Slow."""
+class DOP853(Integrator):
+    """SciPy's DOP853 (order 8), the independent high-accuracy reference. Slow (pure Python);
+    in ensembles it runs realisation by realisation, for validation."""
 
     rtol: float = 1e-10
     atol: float = 1e-12
@@ -101,27 +208,22 @@ class DOP853:
         object.__setattr__(self, "rtol", rtol)
         object.__setattr__(self, "atol", atol)
 
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol):
+    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
         status, info, peak_v, peak_t, grid_v, xf, vf = dop853_integrate(
             chain.masses, chain.stiffness, chain.n, chain.observed, x.copy(), v.copy(),
             rtol=self.rtol, atol=self.atol, t_max=t_max, stop_at_exit=stop_at_exit,
-            exit_margin=exit_margin, max_steps=max_steps, peak_rtol=peak_rtol, t_grid=t_grid,
+            exit_margin=controls.exit_margin, max_steps=controls.max_steps, peak_rtol=controls.peak_rtol, t_grid=t_grid,
         )
         x[:] = xf
         v[:] = vf
         return int(status), info, peak_v, peak_t, grid_v
 
 
-def _outputs(chain, t_grid):
-    k = chain.observed.size
-    return np.zeros(k), np.zeros(k), np.zeros((t_grid.size, k)), np.zeros(5)  # velocities time-major
-
-
 #: Registered integrators by name (the CLI's ``--integrator`` choices).
 INTEGRATORS = {cls.name: cls for cls in (DP5, Verlet, DOP853)}
 
 
-def get_integrator(spec=None):
+def get_integrator(spec=None) -> Integrator:
     """An integrator instance from an instance, a registered name, or None (DP5 defaults)."""
     if spec is None:
         return DP5()
@@ -130,6 +232,15 @@ def get_integrator(spec=None):
             return INTEGRATORS[spec.lower()]()
         except KeyError:
             raise ValueError(f"unknown integrator {spec!r}; choose one of {sorted(INTEGRATORS)}") from None
-    if hasattr(spec, "integrate") and hasattr(spec, "order"):
+    if isinstance(spec, Integrator):
         return spec
     raise ValueError(f"integrator must be a name in {sorted(INTEGRATORS)} or an instance such as granchain.DP5(), got {spec!r}")
+
+
+def integrator_from_record(record: dict) -> Integrator:
+    """The integrator a stored :meth:`Integrator.describe` record names (for stores read back)."""
+    record = dict(record)
+    name = record.pop("name", None)
+    if name not in INTEGRATORS:
+        raise ValueError(f"the stored integrator {name!r} is not registered here; known: {sorted(INTEGRATORS)}")
+    return INTEGRATORS[name](**record)

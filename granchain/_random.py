@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._chain import HERTZ, Chain, decorated
-from ._distributions import as_distribution
+from ._distributions import as_distribution, small_radius_distribution
 from ._validate import count
 
 __all__ = ["realization_rng", "draw_small_radii", "random_decorated"]
@@ -40,5 +40,6 @@ def random_decorated(size: int, dist=None, *, seed: int = 0, realization: int = 
     stream of (seed, realization).
     """
     size = count("size", size, minimum=2)
+    dist = small_radius_distribution(dist, stacklevel=2)
     radii = draw_small_radii(dist, size - 1, seed, [realization])[0]
     return decorated(radii, n=n, initial_velocity=initial_velocity)

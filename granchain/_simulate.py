@@ -2,41 +2,17 @@
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
 import numpy as np
 
 from ._chain import Chain
-from ._integrators import get_integrator
-from ._kernels import _common as codes
-from ._kernels._common import total_energy, total_momentum
-from ._validate import count, finite_scalar
+from ._integrators import RunControls, get_integrator
+from ._kernels._common import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END, total_energy, total_momentum
+from ._status import Status
+from ._validate import finite_scalar
 
 __all__ = ["Status", "PulseResult", "simulate", "default_t_max"]
-
-
-class Status(enum.IntEnum):
-    """Outcome of one integration (also stored per realisation in ensembles)."""
-
-    SUCCESS = codes.SUCCESS
-    T_MAX = codes.T_MAX
-    MAX_STEPS = codes.MAX_STEPS
-    STEP_UNDERFLOW = codes.STEP_UNDERFLOW
-    NONFINITE = codes.NONFINITE
-
-    @property
-    def message(self) -> str:
-        return _MESSAGES[self]
-
-
-_MESSAGES = {
-    Status.SUCCESS: "finished: the pulse left the last granule (stop='exit') or t_max was reached (stop='t_max')",
-    Status.T_MAX: "t_max was reached before the pulse left the last granule: raise t_max",
-    Status.MAX_STEPS: "the step budget (max_steps) ran out: raise max_steps or loosen rtol",
-    Status.STEP_UNDERFLOW: "the step size underflowed: the chain is too stiff for these tolerances",
-    Status.NONFINITE: "the state became non-finite (NaN/inf)",
-}
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,13 +134,7 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     if stop not in ("exit", "t_max"):
         raise ValueError(f"stop must be 'exit' or 't_max', got {stop!r}")
     t_max = default_t_max(chain) if t_max is None else finite_scalar("t_max", t_max, positive=True)
-    exit_margin = finite_scalar("exit_margin", exit_margin)
-    if exit_margin < 0:
-        raise ValueError(f"exit_margin must be >= 0, got {exit_margin}")
-    max_steps = count("max_steps", max_steps, minimum=1)
-    peak_rtol = finite_scalar("peak_rtol", peak_rtol)
-    if peak_rtol < 0:
-        raise ValueError(f"peak_rtol must be >= 0, got {peak_rtol}")
+    controls = RunControls(exit_margin, max_steps, peak_rtol)
     grid = np.zeros(0) if t_grid is None else np.asarray(t_grid, dtype=float).reshape(-1)
     if grid.size:
         if not np.all(np.isfinite(grid)) or grid[0] < 0 or np.any(np.diff(grid) <= 0):
@@ -176,7 +146,7 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     v = np.zeros(chain.size)
     v[0] = chain.initial_velocity
     status, info, peak_v, peak_t, grid_v = integ.integrate(
-        chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit"), exit_margin=exit_margin, max_steps=max_steps, peak_rtol=peak_rtol
+        chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit"), controls=controls
     )
     e0, p0 = chain.energy, chain.momentum
     e1 = total_energy(x, v, chain.masses, chain.stiffness, chain.n)
@@ -188,13 +158,13 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         peak_velocity=peak_v,
         peak_time=peak_t,
         status=Status(status),
-        t_end=float(info[0]),
-        exit_time=float(info[3]),
+        t_end=float(info[INFO_T_END]),
+        exit_time=float(info[INFO_EXIT]),
         energy_error=float((e1 - e0) / e0),
         momentum_error=float((p1 - p0) / p0),
-        n_steps=int(info[1]),
-        n_rejected=int(info[2]),
-        n_evaluations=int(info[4]),
+        n_steps=int(info[INFO_STEPS]),
+        n_rejected=int(info[INFO_REJECTED]),
+        n_evaluations=int(info[INFO_EVALUATIONS]),
         t_grid=grid if grid.size else None,
         velocity=np.ascontiguousarray(grid_v.T) if grid.size else None,
         positions=x,

@@ -41,8 +41,8 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from ._chain import HERTZ, Chain
-from ._distributions import Uniform, as_distribution
-from ._effective import effective
+from ._distributions import Uniform, small_radius_distribution
+from ._effective import effective, effective_parameters
 from ._random import draw_small_radii
 from ._validate import count, exponent, finite_scalar, warn_effective_validity
 
@@ -192,18 +192,24 @@ def travel_times(chain: Chain, *, momentum_conserving: bool = False) -> BCATimes
     return BCATimes(chain, red, v, T, t)
 
 
-def _small_radii(small_radii) -> np.ndarray:
+def _small_radii(small_radii, large_radii=None) -> tuple[np.ndarray, np.ndarray]:
+    """(small radii (..., N-1), large radii (..., N)) checked: small no larger than their smaller
+    neighbour, a warning where the ratio exceeds the effective description's validity."""
     r = _positive("small_radii", small_radii)
     if r.ndim == 0 or r.shape[-1] < 1:
         raise ValueError(f"small_radii needs shape (..., N-1) with N-1 >= 1, got shape {r.shape}")
-    if r.max() > 1.0:
-        raise ValueError(f"small_radii must be <= 1 (the large radius), got max {r.max():.6g}")
-    warn_effective_validity(float(r.max()), what="small_radii", stacklevel=4)
-    return r
+    big = np.ones(r.shape[:-1] + (r.shape[-1] + 1,))
+    if large_radii is not None:
+        big = big * _positive("large_radii", large_radii)
+    ratio = r / np.minimum(big[..., :-1], big[..., 1:])
+    if ratio.max() > 1.0:
+        raise ValueError(f"small_radii must be <= their neighbouring large radii, got a ratio of {ratio.max():.6g}")
+    warn_effective_validity(float(ratio.max()), what="small_radii", stacklevel=4)
+    return r, big
 
 
 def arrival_times(small_radii, n=HERTZ, *, approximation: str = "full", initial_velocity: float = 1.0,
-                  momentum_conserving: bool = False) -> np.ndarray:
+                  momentum_conserving: bool = False, large_radii=None) -> np.ndarray:
     """BCA arrival times t_k at every large granule of decorated chains, shape (..., N).
 
     ``small_radii`` has shape (..., N-1) (last axis: the gaps; leading axes:
@@ -218,17 +224,18 @@ def arrival_times(small_radii, n=HERTZ, *, approximation: str = "full", initial_
 
     All are scaled by v0^(2/n-1) for an initial velocity v0 (momentum-conserving:
     v0 / mu_1, which changes only ``"full"``). t_1 = 0; t_k sums k-1 terms.
+    ``large_radii`` (N values, ``"full"`` only) replaces the unit large granules, e.g. for a
+    tapered decorated chain (:class:`granchain.TaperedDecorated`).
     """
     n = _bca_n(n)
-    r = _small_radii(small_radii)
+    r, big = _small_radii(small_radii, large_radii)
     v0 = finite_scalar("initial_velocity", initial_velocity, positive=True)
+    if large_radii is not None and approximation != "full":
+        raise ValueError("large_radii needs approximation='full' (Eqs. total-time-1, -2 assume unit large granules)")
     if approximation == "full":
-        s = r**3
-        mu = np.ones(r.shape[:-1] + (r.shape[-1] + 1,))
-        mu[..., :-1] += 0.5 * s  # Eq. (renorm-mass)
-        mu[..., 1:] += 0.5 * s
-        c = np.sqrt(2.0 * r / (1.0 + r)) / 2.0 ** (n - 1.0)  # Eqs. (effec-int), (zetak)
-        v_start = v0 / mu[..., 0] if momentum_conserving else np.full(r.shape[:-1], v0)
+        # The effective chain exactly as granchain.effective builds it (Eqs. renorm-mass, effec-int, zetak).
+        mu, c = effective_parameters(big, r, n)
+        v_start = v0 * big[..., 0] ** 3 / mu[..., 0] if momentum_conserving else np.full(r.shape[:-1], v0)
         return _bca(mu, c, n, v_start)[3]
     if approximation == "equal-mass":
         x = ((1.0 + r) / (2.0 * r)) ** (1.0 / (2.0 * n))  # Eq. (total-time-1)
@@ -248,7 +255,7 @@ def slope_uniform(alpha: float, beta: float, n=HERTZ, m: float = 1.0) -> float:
     S(0.01, 0.4) = 2.3482 for n = 5/2 (paper: 2.348).
     """
     n = _bca_n(n)
-    d = Uniform(alpha, beta)  # validates alpha < beta, warns above 0.4
+    d = small_radius_distribution(Uniform(alpha, beta), stacklevel=2)  # validates alpha < beta <= 1, warns above 0.4
     m = finite_scalar("m", m, positive=True)
     p = 1.0 - 1.0 / (2.0 * n)
     return 2 * n * A(n) / (2 * n - 1) * (m / 2**1.5) ** (1 / n) * (d.beta**p - d.alpha**p) / (d.beta - d.alpha)  # Eq. (slope)
@@ -263,7 +270,7 @@ def slope(distribution=None, n=HERTZ, m: float = 1.0, numerator: bool = False) -
     """
     n = _bca_n(n)
     m = finite_scalar("m", m, positive=True)
-    d = as_distribution(distribution)
+    d = small_radius_distribution(distribution, stacklevel=2)
     if numerator:
         mean = d.expect(lambda r: ((1.0 + r) / (2.0 * r)) ** (1.0 / (2.0 * n)))
     else:
@@ -360,7 +367,7 @@ def gaussian_limit(distribution=None, granule: int = 25, n=HERTZ, m: float = 1.0
     """
     n = _bca_n(n)
     k = count("granule", granule, minimum=1)
-    d = as_distribution(distribution)
+    d = small_radius_distribution(distribution, stacklevel=2)
     if isinstance(d, Uniform):
         x = XDistribution(d.alpha, d.beta, n)
         kappa, var = x.kappa, x.variance
@@ -419,7 +426,7 @@ def monte_carlo_arrival_times(size: int = 26, distribution=None, realizations=30
             raise ValueError(f"small_radii must have shape (realizations, size - 1 = {N - 1}), got {r.shape}")
         stream, seed = "given", None
     else:
-        d = as_distribution(distribution)
+        d = small_radius_distribution(distribution, stacklevel=2)
         if np.ndim(realizations) == 0:
             idx = np.arange(count("realizations", realizations, minimum=1))
         else:

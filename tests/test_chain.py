@@ -235,7 +235,8 @@ BAD_INPUTS = [
     ("alpha = beta", lambda: gc.Uniform(0.2, 0.2), r"alpha = 0\.2 must be < beta"),
     ("alpha = 0", lambda: gc.Uniform(0.0, 0.4), r"alpha = 0\.0 must be > 0"),
     ("alpha < 0", lambda: gc.Uniform(-0.1, 0.4), r"alpha = -0\.1 must be > 0"),
-    ("beta > 1", lambda: gc.Uniform(0.1, 1.2), r"beta = 1\.2 must be <= 1"),
+    ("small radii beyond 1", lambda: gc.RandomDecorated(6, gc.Uniform(0.1, 1.2)), r"reaches radius 1\.2 > 1"),
+    ("small beyond large", lambda: gc.decorated([2.0]), r"larger than its neighbouring large granules"),
     ("alpha NaN", lambda: gc.Uniform(math.nan, 0.4), r"alpha must be finite"),
     ("truncation bounds", lambda: gc.Truncated(st.beta(2, 5), lower=0.5, upper=0.4), r"lower < upper"),
     ("not a distribution", lambda: gc.Truncated("beta"), r"dist must be a frozen scipy\.stats"),
@@ -282,12 +283,12 @@ def test_bad_input_raises_value_error_naming_it(make, match):
 @pytest.mark.parametrize(
     "make",
     [
-        lambda: gc.Uniform(0.01, 0.6),
-        lambda: gc.Truncated(st.beta(2, 5)),  # mass up to 1
+        lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.6)),
+        lambda: gc.RandomDecorated(6, gc.Truncated(st.beta(2, 5))),  # mass up to 1
         lambda: gc.effective(gc.decorated([0.5, 0.2])),
         lambda: gc.effective(gc.from_radii([1.0, 0.45, 1.0])),
     ],
-    ids=["Uniform beta 0.6", "Truncated beta(2,5) to 1", "effective R=0.5", "effective R=0.45"],
+    ids=["RandomDecorated Uniform beta 0.6", "RandomDecorated Truncated beta(2,5) to 1", "effective R=0.5", "effective R=0.45"],
 )
 def test_beyond_validity_warns(make):
     with pytest.warns(gc.EffectiveValidityWarning, match=r"> 0\.4"):
@@ -297,11 +298,15 @@ def test_beyond_validity_warns(make):
 @pytest.mark.parametrize(
     "make",
     [
-        lambda: gc.Uniform(0.01, 0.4),
-        lambda: gc.Truncated(st.beta(2, 5), upper=0.4),
+        lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.4)),
+        lambda: gc.RandomDecorated(6, gc.Truncated(st.beta(2, 5), upper=0.4)),
         lambda: gc.effective(gc.decorated([0.4, 0.2])),
+        # radii beyond 0.4 are no small granules outside decorated families: no warning
+        lambda: gc.Uniform(0.01, 0.6),
+        lambda: gc.Truncated(st.beta(2, 5)),
+        lambda: gc.RandomRadii(6, gc.Uniform(0.5, 1.5)),
     ],
-    ids=["Uniform to 0.4", "Truncated to 0.4", "effective R=0.4"],
+    ids=["Uniform to 0.4", "Truncated to 0.4", "effective R=0.4", "bare Uniform", "bare Truncated", "RandomRadii"],
 )
 def test_within_validity_is_silent(make):
     with warnings.catch_warnings():
@@ -311,8 +316,10 @@ def test_within_validity_is_silent(make):
 
 @pytest.mark.parametrize(
     "make",
-    [lambda: gc.Uniform(0.01, 0.6), lambda: gc.Truncated(st.beta(2, 5)), lambda: gc.effective(gc.decorated([0.5, 0.2]))],
-    ids=["Uniform", "Truncated", "effective"],
+    [lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.6)), lambda: gc.TaperedDecorated(6, 0.9, gc.Truncated(st.beta(2, 5))),
+     lambda: gc.effective(gc.decorated([0.5, 0.2])), lambda: gc.random_decorated(6, gc.Uniform(0.01, 0.6)),
+     lambda: gc.run_ensemble(3, gc.Uniform(0.3, 0.5), realizations=1, chains="effective", progress=False)],
+    ids=["RandomDecorated", "TaperedDecorated", "effective", "random_decorated", "run_ensemble"],
 )
 def test_validity_warning_points_at_the_callers_line(make):
     """The warning must be attributed to the user's code (stacklevel), not to package internals."""

@@ -379,7 +379,12 @@ def test_every_variable_is_described(local):
     params = json.loads(local.attrs["granchain_parameters"])
     assert params["seed"] == SEED == local.attrs["seed"]
     assert params["realizations"] == R == local.attrs["realizations"]
-    assert params["n_large"] == N and params["rtol"] == gc.ENSEMBLE_RTOL and params["atol"] == gc.ENSEMBLE_ATOL
+    assert params["family"] == json.loads(local.attrs["granchain_family"]) == gc.RandomDecorated(N).describe()
+    assert params["family"]["n_large"] == N == local.attrs["n_large"]
+    integrator = json.loads(local.attrs["granchain_integrator"])
+    assert integrator == params["integrator"] == {"name": "dp5", "rtol": gc.ENSEMBLE_RTOL, "atol": gc.ENSEMBLE_ATOL,
+                                                   "first_step": 1e-3, "fixed_step": None}
+    assert local.attrs["rtol"] == gc.ENSEMBLE_RTOL and local.attrs["integrator"] == "dp5"
     assert local.attrs["granchain_version"] == gc.__version__
 
 
@@ -418,10 +423,10 @@ def test_failed_realisations_are_recorded_not_fatal():
     """A step budget between the cheapest and dearest decorated realisations: some fail
     (MAX_STEPS), the others and every effective chain succeed; only successes enter the sums."""
     assert int(gc.Status.MAX_STEPS) == 2 and int(gc.Status.SUCCESS) == 0
-    full = ens.compute_chunk(ens.EnsembleSpec(N, realizations=16, seed=3, chunk_size=16), 0)
+    full = ens.compute_chunk(ens.EnsembleSpec(gc.RandomDecorated(N), realizations=16, seed=3, chunk_size=16), 0)
     steps = full["n_steps"][0]
     budget = int(np.median(steps))
-    spec = ens.EnsembleSpec(N, realizations=16, seed=3, chunk_size=16, max_steps=budget)
+    spec = ens.EnsembleSpec(gc.RandomDecorated(N), realizations=16, seed=3, chunk_size=16, controls=gc.RunControls(max_steps=budget))
     out = ens.compute_chunk(spec, 0)
     status = out["status"]
     assert set(np.unique(status[0])) == {0, 2}, status[0]
@@ -453,6 +458,14 @@ def test_failed_realisations_are_recorded_not_fatal():
         ({"n_large": 1}, "n_large"),
         ({"seed": -1}, "seed"),
         ({"rtol": 0.0}, "rtol"),
+        # one set of run-control checks for simulate and ensembles
+        ({"exit_margin": -1.0}, "exit_margin"),
+        ({"peak_rtol": -1e-6}, "peak_rtol"),
+        ({"max_steps": 0}, "max_steps"),
+        ({"integrator": "rk4"}, "integrator"),
+        ({"integrator": gc.Verlet(1e-3), "rtol": 1e-7}, "rtol"),
+        ({"n_large": gc.RandomDecorated(N), "distribution": gc.Uniform(0.1, 0.2)}, "distribution"),
+        ({"n_large": "26"}, "family"),
     ],
 )
 def test_bad_arguments_name_the_parameter(kwargs, name, tmp_path):

@@ -22,7 +22,8 @@ def _drop_stale_cache() -> None:
 
     here = Path(__file__).parent
     digest = hashlib.sha256(numba.__version__.encode())
-    for src in sorted(here.glob("*.py")):
+    # Every kernel source, and the pure-Python module whose constants the kernels freeze in.
+    for src in sorted(here.glob("*.py")) + [here.parent / "_status.py"]:
         digest.update(src.name.encode() + src.read_bytes())
     key = digest.hexdigest()
     cache = here / "__pycache__"

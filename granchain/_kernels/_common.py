@@ -19,12 +19,16 @@ from numba import njit
 
 from ._jit import JIT
 
-# Status codes of one integration (mirrored by granchain.Status).
-SUCCESS = 0
-T_MAX = 1
-MAX_STEPS = 2
-STEP_UNDERFLOW = 3
-NONFINITE = 4
+# Status codes of one integration: defined with their messages in plain Python (granchain._status).
+from .._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX  # noqa: E402,F401
+
+# Slots of the ``info`` array every single-chain kernel fills.
+INFO_T_END = 0  # time the run stopped
+INFO_STEPS = 1  # accepted steps
+INFO_REJECTED = 2  # rejected steps
+INFO_EXIT = 3  # time the pulse left the last granule (-1: it did not)
+INFO_EVALUATIONS = 4  # force evaluations (whole-window sweeps)
+INFO_SIZE = 5
 
 # Fast paths for the contact power delta^(n-1).
 POW_GENERAL = 0
@@ -229,3 +233,13 @@ def final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t):
         if a[obs[q]] > 0.0 and is_new_peak(v[obs[q]], peak_v[q], peak_rtol):
             peak_v[q] = v[obs[q]]
             peak_t[q] = t
+
+
+@njit(**JIT)
+def write_info(info, t, n_acc, n_rej, exit_since, n_eval):
+    """Fill the ``info`` record of a finished run (slots INFO_*)."""
+    info[INFO_T_END] = t
+    info[INFO_STEPS] = n_acc
+    info[INFO_REJECTED] = n_rej
+    info[INFO_EXIT] = exit_since
+    info[INFO_EVALUATIONS] = n_eval

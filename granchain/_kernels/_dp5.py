@@ -35,6 +35,7 @@ from ._common import (
     is_finite_window,
     end_of_step,
     stop_time,
+    write_info,
 )
 from ._jit import JIT
 
@@ -332,9 +333,5 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
             err_old = max(err, 1e-4)
 
     final_peaks(obs, v, Kv[0], t, peak_rtol, peak_v, peak_t)
-    info[0] = t
-    info[1] = n_acc
-    info[2] = n_rej
-    info[3] = exit_since
-    info[4] = n_eval
+    write_info(info, t, n_acc, n_rej, exit_since, n_eval)
     return status

@@ -1,8 +1,8 @@
-"""Many realisations in parallel (Numba threads), one DP5 integration each.
+"""Many realisations in parallel (Numba threads), one single-chain integration each.
 
-Realisation i of a chunk is integrated exactly as ``granchain.simulate`` would
-integrate it (the same ``dp5_integrate``, the same chain arrays), so per-
-realisation results are bitwise independent of how realisations are grouped.
+Realisation r of a batch is integrated by :func:`~granchain._kernels._dispatch.integrate_chain`,
+the code ``granchain.simulate`` runs, on the same chain arrays: per-realisation results are
+bitwise independent of how realisations are grouped, and equal to ``simulate``.
 
 The ensemble-averaged pulse <v_k(t)> is accumulated as running sums in fixed
 point: each velocity is rounded to a multiple of 2^-bits and summed as an
@@ -17,22 +17,34 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from ._common import SUCCESS, total_energy
-from ._dp5 import dp5_integrate
-from ._jit import JIT_PARALLEL
+from ._common import INFO_SIZE, INFO_STEPS, INFO_T_END, SUCCESS, total_energy
+from ._dispatch import integrate_chain
+from ._jit import JIT, JIT_PARALLEL
+
+
+@njit(**JIT)
+def accumulate_fixed_point(grid_v, scale, acc1, acc2):
+    """acc1 += round(v * scale), acc2 += round(v^2 * scale) over a (T, K) velocity grid."""
+    T, K = grid_v.shape
+    for g in range(T):
+        for q in range(K):
+            w = grid_v[g, q]
+            if w != 0.0:  # granules the pulse has not reached are exactly at rest
+                acc1[g, q] += np.int64(np.rint(w * scale))
+                acc2[g, q] += np.int64(np.rint(w * w * scale))
 
 
 @njit(**JIT_PARALLEL)
-def dp5_ensemble(masses, stiffness, n, pw, v_init, obs, rtol, atol, h_init, t_max, exit_margin, max_steps, peak_rtol, t_grid, scale, n_threads,
-                 peak_v, peak_t, status, energy_error, n_steps, t_end, sum_v, sum_v2, n_valid):
+def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, t_max, exit_margin, max_steps, peak_rtol,
+                    t_grid, scale, n_threads, peak_v, peak_t, status, energy_error, n_steps, t_end, sum_v, sum_v2, n_valid):
     """Integrate realisations r = 0..R-1 (rows of ``masses``/``stiffness``/``v_init``, shared ``obs``).
 
-    Per realisation writes peak_v[r, :], peak_t[r, :], status[r],
-    energy_error[r] ((E_end - E_0)/E_0), n_steps[r], t_end[r]. Adds
-    round(v * scale) and round(v^2 * scale) of every successful realisation's
-    observed velocities on ``t_grid`` into sum_v / sum_v2 (int64, (T, K)) and
-    counts them in n_valid[0]. ``n_threads`` must be numba.get_num_threads()
-    (passed in: calling it here would stop Numba from caching the kernel).
+    ``kernel``/``params``: the integrator (see ``_dispatch``). Per realisation writes
+    peak_v[r, :], peak_t[r, :], status[r], energy_error[r] ((E_end - E_0)/E_0),
+    n_steps[r], t_end[r]. Adds round(v * scale) and round(v^2 * scale) of every
+    successful realisation's observed velocities on ``t_grid`` into sum_v / sum_v2
+    (int64, (T, K)) and counts them in n_valid[0]. ``n_threads`` must be
+    numba.get_num_threads() (passed in: calling it here would stop Numba from caching).
     """
     R, M = masses.shape
     K = obs.shape[0]
@@ -48,23 +60,18 @@ def dp5_ensemble(masses, stiffness, n, pw, v_init, obs, rtol, atol, h_init, t_ma
         v = np.zeros(M)
         v[0] = v_init[r]
         grid_v = np.zeros((T, K))
-        info = np.zeros(5)
-        st = dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, 0.0, t_max, True, exit_margin, max_steps, peak_rtol,
-                           t_grid, x, v, peak_v[r], peak_t[r], grid_v, info)
+        info = np.zeros(INFO_SIZE)
+        st = integrate_chain(kernel, params, m, c, n, pw, obs, t_max, True, exit_margin, max_steps, peak_rtol,
+                             t_grid, x, v, peak_v[r], peak_t[r], grid_v, info)
         status[r] = st
-        n_steps[r] = np.int64(info[1])
-        t_end[r] = info[0]
+        n_steps[r] = np.int64(info[INFO_STEPS])
+        t_end[r] = info[INFO_T_END]
         e0 = 0.5 * m[0] * v_init[r] * v_init[r]  # the same expression as Chain.energy
         e1 = total_energy(x, v, m, c, n)
         energy_error[r] = (e1 - e0) / e0
         if st == SUCCESS:
             cnt[tid] += 1
-            for g in range(T):
-                for q in range(K):
-                    w = grid_v[g, q]
-                    if w != 0.0:  # granules the pulse has not reached are exactly at rest
-                        acc1[tid, g, q] += np.int64(np.rint(w * scale))
-                        acc2[tid, g, q] += np.int64(np.rint(w * w * scale))
+            accumulate_fixed_point(grid_v, scale, acc1[tid], acc2[tid])
     for th in range(n_threads):
         n_valid[0] += cnt[th]
         for g in range(T):

@@ -26,6 +26,7 @@ from ._common import (
     is_new_peak,
     end_of_step,
     stop_time,
+    write_info,
 )
 from ._jit import JIT
 
@@ -109,9 +110,5 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
         if status >= 0:
             break
     final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t)
-    info[0] = t
-    info[1] = n_acc
-    info[2] = 0
-    info[3] = exit_since
-    info[4] = n_eval
+    write_info(info, t, n_acc, 0, exit_since, n_eval)
     return status

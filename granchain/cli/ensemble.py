@@ -1,33 +1,62 @@
-"""``granchain ensemble``: many random decorated chains into a resumable Zarr store."""
+"""``granchain ensemble``: many random chains of one family into a resumable Zarr store."""
 
 from __future__ import annotations
 
+import argparse
 import sys
+
+FAMILY_HELP = {
+    "decorated": "the paper's chain: N large granules (R = 1), small radii U[alpha, beta] between them "
+                 "(--large, --alpha, --beta; --chain decorated/effective/both)",
+    "tapered-decorated": "large radii q^(k-1), small radius = U[alpha, beta] x its smaller neighbour "
+                         "(--large, --q, --alpha, --beta; --chain decorated/effective/both)",
+    "polydisperse": "every radius i.i.d. U[alpha, beta], all granules observed (--size, --alpha, --beta)",
+    "binary": "two species in random order, species b with probability p (--size, --radii RA,RB, --p)",
+}
+#: Default radius interval per family: small radii (decorated) or all radii (polydisperse).
+DEFAULT_INTERVAL = {"decorated": (0.01, 0.4), "tapered-decorated": (0.01, 0.4), "polydisperse": (0.5, 1.0)}
 
 
 def add_parser(subparsers) -> None:
+    from .._integrators import INTEGRATORS
+
+    families = "\n".join(f"  {name:<18} {text}" for name, text in FAMILY_HELP.items())
+    integrators = "\n".join(f"  {name:<18} {(cls.__doc__ or '').strip().splitlines()[0]}" for name, cls in INTEGRATORS.items())
     p = subparsers.add_parser(
         "ensemble",
-        help="integrate many random decorated chains (and/or their effective chains) into a Zarr store",
+        help="integrate many random chains of one family (default: the paper's random decorated chain) into a Zarr store",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
-            "Draw the small radii of each realisation uniformly on [alpha, beta] (realisation i from "
-            "SeedSequence(seed, spawn_key=(i,))), integrate the decorated chain and/or its effective chain, and "
-            "write per-realisation peaks and the averaged pulse to a Zarr store that xarray.open_dataset reads. "
-            "Finished chunks are saved as they complete; run again with --resume to continue an interrupted run."
+            "Draw the random parameters of each realisation (realisation i from SeedSequence(seed, spawn_key=(i,))),\n"
+            "integrate its chains and write per-realisation peaks and the averaged pulse to a Zarr store that\n"
+            "xarray.open_dataset(path, engine='zarr') reads. Finished chunks are saved as they complete; run the\n"
+            "same command again with --resume to continue an interrupted run.\n\n"
+            f"families (--family):\n{families}\n\nintegrators (--integrator):\n{integrators}"
         ),
     )
-    p.add_argument("--large", type=int, default=26, help="N, large granules per chain (default 26)")
+    fam = p.add_argument_group("chain family")
+    fam.add_argument("--family", choices=tuple(FAMILY_HELP), default="decorated", help="the family of random chains (default decorated)")
+    fam.add_argument("--large", type=int, default=26, help="decorated families: N, large granules per chain (default 26)")
+    fam.add_argument("--size", type=int, default=26, help="polydisperse, binary: granules per chain (default 26)")
+    fam.add_argument("--alpha", type=float, default=None, help="smallest radius of the uniform distribution (default 0.01; polydisperse 0.5)")
+    fam.add_argument("--beta", type=float, default=None, help="largest radius of the uniform distribution (default 0.4; polydisperse 1.0)")
+    fam.add_argument("--q", type=float, default=0.95, help="tapered-decorated: ratio of successive large radii (default 0.95)")
+    fam.add_argument("--radii", default="1,0.5", metavar="RA,RB", help="binary: radii of species a and b (default 1,0.5)")
+    fam.add_argument("--p", type=float, default=0.5, help="binary: probability of species b (default 0.5)")
+    fam.add_argument("--n", type=float, default=2.5, help="contact exponent (default 2.5, Hertz)")
+    fam.add_argument("--momentum-conserving", action="store_true",
+                     help="decorated families: the effective chain starts with m_1/mu_1 instead of velocity 1")
+    p.add_argument("--chain", default="both", help="which chains: decorated, effective or both (decorated families; default both)")
     p.add_argument("--realizations", type=int, default=1000, help="number of random chains (default 1000)")
-    p.add_argument("--alpha", type=float, default=0.01, help="smallest small radius (default 0.01)")
-    p.add_argument("--beta", type=float, default=0.4, help="largest small radius (default 0.4)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random radii (default 0)")
-    p.add_argument("--chain", choices=("decorated", "effective", "both"), default="both", help="which chains to integrate (default both, paired)")
-    p.add_argument("--n", type=float, default=2.5, help="contact exponent (default 2.5, Hertz)")
-    p.add_argument("--rtol", type=float, default=None, help="DP5 relative tolerance (default 1e-6)")
-    p.add_argument("--atol", type=float, default=None, help="DP5 absolute tolerance (default 1e-9)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random parameters (default 0)")
+    integ = p.add_argument_group("integrator")
+    integ.add_argument("--integrator", choices=sorted(INTEGRATORS), default="dp5", help="integrator (default dp5)")
+    integ.add_argument("--rtol", type=float, default=None, help="relative tolerance (dp5: default 1e-6; dop853)")
+    integ.add_argument("--atol", type=float, default=None, help="absolute tolerance (dp5: default 1e-9; dop853)")
+    integ.add_argument("--step", type=float, default=None, help="time step (verlet; default 1e-3)")
     p.add_argument("--chunk-size", type=int, default=500, help="realisations per chunk, the unit of saving (default 500)")
     p.add_argument("--t-end", type=float, default=None, help="end of the time grid of the averaged pulse (default: past the pulse's exit)")
-    p.add_argument("--dt", type=float, default=0.1, help="spacing of the time grid (default 0.1)")
+    p.add_argument("--dt", type=float, default=0.1, help="spacing of the time grid of the averaged pulse (default 0.1)")
     p.add_argument("--out", required=True, help="Zarr store to write, e.g. runs/N26.zarr")
     p.add_argument("--resume", action="store_true", help="continue an existing store written with the same arguments")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")
@@ -36,17 +65,67 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _pair(text: str) -> tuple:
+    try:
+        values = tuple(float(s) for s in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 2:
+        raise ValueError(f"--radii needs two comma-separated radii RA,RB, got {text!r}")
+    return values
+
+
+def build_family(args):
+    """The chain family the arguments describe."""
+    from .._distributions import Uniform
+    from ..families import BinaryRandom, RandomDecorated, RandomRadii, TaperedDecorated
+
+    lo, hi = DEFAULT_INTERVAL.get(args.family, (None, None))
+    if args.family == "binary":
+        if args.alpha is not None or args.beta is not None:
+            raise ValueError("--alpha/--beta do not apply to --family binary (it takes --radii RA,RB and --p)")
+        return BinaryRandom(args.size, _pair(args.radii), args.p, n=args.n)
+    dist = Uniform(lo if args.alpha is None else args.alpha, hi if args.beta is None else args.beta)
+    if args.family == "polydisperse":
+        return RandomRadii(args.size, dist, n=args.n)
+    if args.family == "tapered-decorated":
+        return TaperedDecorated(args.large, args.q, dist, n=args.n, momentum_conserving=args.momentum_conserving)
+    return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving)
+
+
+def build_integrator(args):
+    """The integrator the arguments name, with its settings (the ensemble default for the default DP5)."""
+    import dataclasses
+
+    from .._ensemble import ensemble_integrator
+    from .._integrators import INTEGRATORS
+
+    cls = INTEGRATORS[args.integrator]
+    given = {"rtol": args.rtol, "atol": args.atol, "dt": args.step}
+    fields = {f.name for f in dataclasses.fields(cls)}
+    wrong = [f"--{'step' if k == 'dt' else k}" for k, v in given.items() if v is not None and k not in fields]
+    if wrong:
+        raise ValueError(f"{', '.join(wrong)} does not apply to --integrator {args.integrator}")
+    default = ensemble_integrator()
+    base = dataclasses.asdict(default) if isinstance(default, cls) else {}
+    return cls(**{**base, **{k: v for k, v in given.items() if v is not None}})
+
+
 def run(args) -> int:
     import numpy as np
 
-    from .._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, default_time_grid, run_ensemble
-    from .._distributions import Uniform
+    from .._ensemble import run_ensemble
 
-    grid = default_time_grid(args.large, args.dt)
+    family = build_family(args)
+    grid = family.default_time_grid(args.dt)
     if args.t_end is not None:
         if not args.t_end > 0:
             raise ValueError(f"--t-end must be > 0, got {args.t_end}")
         grid = np.round(np.arange(0.0, args.t_end + 0.5 * args.dt, args.dt), 12)
+    integrator = build_integrator(args)
+    chains = tuple(c.strip() for c in args.chain.split(","))
+    if chains == ("both",) or len(family.chains) == 1 and args.chain == "both":
+        chains = "both"
     client = None
     if args.scheduler:
         from distributed import Client
@@ -54,10 +133,9 @@ def run(args) -> int:
         client = Client(args.scheduler)
     try:
         ds = run_ensemble(
-            args.large, Uniform(args.alpha, args.beta), args.realizations, args.seed, args.chain, n=args.n,
-            rtol=ENSEMBLE_RTOL if args.rtol is None else args.rtol, atol=ENSEMBLE_ATOL if args.atol is None else args.atol,
-            t_grid=grid, chunk_size=args.chunk_size, out=args.out, resume=args.resume, client=client,
-            progress=not args.quiet, threads=args.threads,
+            family, realizations=args.realizations, seed=args.seed, chains=chains, integrator=integrator, t_grid=grid,
+            chunk_size=args.chunk_size, out=args.out, resume=args.resume, client=client, progress=not args.quiet,
+            threads=args.threads,
         )
     except KeyboardInterrupt:
         print(f"granchain ensemble: interrupted; finished chunks are saved in {args.out}. "
@@ -67,6 +145,7 @@ def run(args) -> int:
         if client is not None:
             client.close()
     failed = int((ds["status"] != 0).sum())
-    print(f"wrote {args.out}: {ds.sizes['realization']} realisations x {ds.sizes['chain']} chains "
-          f"({', '.join(ds['chain'].values)}), N = {ds.sizes['granule']}; failed integrations: {failed}")
+    print(f"wrote {args.out}: {family.label()}; {ds.sizes['realization']} realisations x {ds.sizes['chain']} chains "
+          f"({', '.join(ds['chain'].values)}), {ds.sizes['granule']} observed granules, integrator "
+          f"{integrator.name}; failed integrations: {failed}")
     return 0

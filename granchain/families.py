@@ -1,0 +1,636 @@
+"""Chain families: how realisation i of an ensemble becomes a chain.
+
+An ensemble (:func:`granchain.run_ensemble`) is a *family* of random chains of one
+size. A family says
+
+* which random parameters realisation i draws from its generator
+  ``realization_rng(seed, i)`` (:meth:`ChainFamily.parameters`, :meth:`ChainFamily.draw`;
+  they are stored per realisation, so any row of a store can be rebuilt);
+* how a batch of those parameters becomes the one chain representation, batched
+  (:meth:`ChainFamily.build`: masses, stiffnesses, initial velocities, observed granules),
+  with the same functions the single-chain builders use, so that a row is bitwise the
+  :class:`~granchain.Chain` of :meth:`ChainFamily.chain`;
+* which chains it can build: the exact chain and, for decorated families, the effective
+  chain of paper Sec. III A (:attr:`ChainFamily.chains`);
+* its record for the store (:meth:`ChainFamily.describe`; :func:`family_from_record`
+  rebuilds it).
+
+Families: :class:`RandomDecorated` (the paper's chain), :class:`TaperedDecorated`,
+:class:`RandomRadii` (polydisperse), :class:`BinaryRandom` (two species) and
+:class:`CustomFamily` (a user's function). Units are the paper's rescaled ones (Sec. II):
+radii in units of the reference (large) radius, masses R^3, the struck granule starts
+with velocity 1.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import warnings
+from dataclasses import dataclass, field
+from typing import Callable, ClassVar, NamedTuple
+
+import numpy as np
+
+from ._chain import HERTZ, Chain, decorated, from_radii, sphere_mass, sphere_stiffness
+from ._distributions import as_distribution, distribution_from_record, small_radius_distribution
+from ._effective import effective, effective_parameters
+from ._random import realization_rng
+from ._validate import count, exponent, finite_scalar
+
+__all__ = [
+    "FAMILIES",
+    "BinaryRandom",
+    "ChainBatch",
+    "ChainFamily",
+    "CustomFamily",
+    "RandomDecorated",
+    "RandomParameter",
+    "RandomRadii",
+    "TaperedDecorated",
+    "family_from_record",
+]
+
+_RADIUS_UNITS = "R_1 (reference radius)"
+
+
+@dataclass(frozen=True)
+class RandomParameter:
+    """One random parameter a family draws per realisation (a store variable).
+
+    ``dims`` are its dimensions after ``realization`` (each named in the family's
+    :meth:`ChainFamily.dims`); ``dtype`` a NumPy dtype name.
+    """
+
+    name: str
+    dims: tuple
+    dtype: str
+    units: str
+    long_name: str
+
+
+class ChainBatch(NamedTuple):
+    """A batch of R chains of one size M, in the one chain representation.
+
+    masses (R, M), stiffness (R, M-1), initial_velocity (R,), observed (K,) 0-based
+    granule indices shared by every row, and the contact exponent n.
+    """
+
+    masses: np.ndarray
+    stiffness: np.ndarray
+    initial_velocity: np.ndarray
+    observed: np.ndarray
+    n: float
+
+
+class ChainFamily:
+    """Base of every chain family (see the module docstring for the contract).
+
+    Subclasses are frozen dataclasses with a class attribute ``kind`` (the registry and
+    CLI name) and implement :meth:`parameters`, :meth:`dims`, :meth:`draw`,
+    :meth:`build`, :meth:`chain`, :meth:`describe` and the properties :attr:`chains`,
+    :attr:`size`, :attr:`n_observed` and :meth:`granule_coordinate`.
+    """
+
+    kind: ClassVar[str]
+    n: float
+
+    # -- what the family is -------------------------------------------------------------
+    @property
+    def chains(self) -> tuple:
+        """Names of the chains the family builds for one realisation (first: the exact chain)."""
+        raise NotImplementedError
+
+    @property
+    def size(self) -> int:
+        """Granules M of the exact chain."""
+        raise NotImplementedError
+
+    @property
+    def n_observed(self) -> int:
+        """Observed granules K (the store's ``granule`` dimension), the same for every chain."""
+        raise NotImplementedError
+
+    def granule_coordinate(self) -> tuple:
+        """(values, long_name) of the store's ``granule`` coordinate."""
+        raise NotImplementedError
+
+    def parameters(self) -> tuple:
+        """The :class:`RandomParameter` records of what :meth:`draw` returns."""
+        raise NotImplementedError
+
+    def dims(self) -> dict:
+        """Extra dimensions of the parameters: name -> (coordinate values, long_name)."""
+        return {}
+
+    def dim_sizes(self) -> dict:
+        """Sizes of every dimension a parameter may use: ``granule`` (the observed granules) and :meth:`dims`."""
+        return {"granule": self.n_observed, **{d: len(values) for d, (values, _) in self.dims().items()}}
+
+    def describe(self) -> dict:
+        """JSON-able record of the family (stored with ensembles; see :func:`family_from_record`)."""
+        raise NotImplementedError
+
+    def label(self) -> str:
+        """A one-line description for titles and progress bars."""
+        return self.kind
+
+    # -- realisations -------------------------------------------------------------------
+    def draw(self, rng: np.random.Generator) -> dict:
+        """The random parameters of one realisation from its generator."""
+        raise NotImplementedError
+
+    def draw_batch(self, seed: int, realizations) -> dict:
+        """Parameters of realisations ``realizations`` (each from ``realization_rng(seed, i)``), stacked."""
+        idx = np.atleast_1d(np.asarray(realizations, dtype=np.int64))
+        sizes = self.dim_sizes()
+        out = {p.name: np.empty((idx.size,) + tuple(sizes[d] for d in p.dims), dtype=p.dtype) for p in self.parameters()}
+        for row, i in enumerate(idx):
+            for name, value in self.draw(realization_rng(seed, i)).items():
+                out[name][row] = value
+        return out
+
+    def build(self, params: dict, chain: str) -> ChainBatch:
+        """The batch of chains ``chain`` (one of :attr:`chains`) for stacked ``params``."""
+        raise NotImplementedError
+
+    def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
+        """Realisation ``realization`` under ``seed`` as a :class:`~granchain.Chain` (default: the exact
+        chain), built with the public single-chain builders; bitwise a row of :meth:`build`."""
+        raise NotImplementedError
+
+    def _chain_name(self, chain: str | None) -> str:
+        chain = self.chains[0] if chain is None else chain
+        if chain not in self.chains:
+            raise ValueError(f"{type(self).__name__} builds the chains {list(self.chains)}, not {chain!r}")
+        return chain
+
+    def default_time_grid(self, dt: float = 0.1) -> np.ndarray:
+        """Times of the averaged pulse: 0 to 1.3 x the BCA arrival time at the last observed granule
+        (the largest over 8 fixed sample realisations) + 10."""
+        from . import bca
+
+        dt = finite_scalar("dt", dt, positive=True)
+        t_arrival = 0.0
+        for i in range(8):
+            ch = self.chain(0, i)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    t_arrival = max(t_arrival, float(bca.travel_times(ch).arrival_time[-1]))
+            except ValueError:  # n <= 2: no binary-collision estimate; ~2.5 time units per granule
+                t_arrival = max(t_arrival, 2.5 * ch.size)
+        return _grid(1.3 * t_arrival + 10.0, dt)
+
+
+def _grid(t_end: float, dt: float) -> np.ndarray:
+    return np.round(np.arange(0.0, t_end + 0.5 * dt, dt), 12)
+
+
+def _stack(params: dict, name: str) -> np.ndarray:
+    try:
+        a = np.asarray(params[name], dtype=float)
+    except KeyError:
+        raise ValueError(f"build() needs the parameter {name!r}; got {sorted(params)}") from None
+    return a[None] if a.ndim == 1 else a
+
+
+# ---------------------------------------------------------------------------- decorated families
+class _Decorated(ChainFamily):
+    """Shared by the decorated families: large granules (radii :meth:`large_radii`) with a random
+    small granule in each gap; the exact "decorated" chain and its "effective" chain. (No fields
+    here: a dataclass base would fix the positional order of its subclasses' fields.)"""
+
+    n_large: int
+    distribution: object
+    momentum_conserving: bool
+
+    def _validate(self, stacklevel: int) -> None:
+        object.__setattr__(self, "n_large", count("n_large", self.n_large, minimum=2))
+        dist = small_radius_distribution(self.distribution, what=f"the small-radius distribution of {type(self).__name__}",
+                                         stacklevel=stacklevel + 1)
+        object.__setattr__(self, "distribution", dist)
+        object.__setattr__(self, "n", exponent(self.n))
+        object.__setattr__(self, "momentum_conserving", bool(self.momentum_conserving))
+
+    def large_radii(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def default_time_grid(self, dt: float = 0.1) -> np.ndarray:
+        """To 1.1 x the BCA arrival time at granule N, + 10: the paper's slope 2.35 per large granule
+        (Eq. slope, unit large granules) scaled by :meth:`arrival_ratio`."""
+        t_end = 1.1 * 2.35 * (self.n_large - 1) * self.arrival_ratio() + 10.0
+        return _grid(t_end, finite_scalar("dt", dt, positive=True))
+
+    def arrival_ratio(self) -> float:
+        """BCA arrival time at granule N of this family's effective chains over that of the same radius
+        ratios between unit large granules (8 fixed sample realisations; exactly 1 without a taper)."""
+        from . import bca
+
+        rng = np.random.default_rng(0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ratios = self.distribution.sample(rng, (8, self.n_large - 1))
+            own = bca.arrival_times(ratios * self.small_scale(), self.n, large_radii=self.large_radii())[:, -1]
+            unit = bca.arrival_times(ratios, self.n)[:, -1]
+        return float(own.sum() / unit.sum())
+
+    def small_scale(self) -> np.ndarray:
+        """What a drawn radius ratio is multiplied by to give gap j's small radius (N-1,)."""
+        big = self.large_radii()
+        return np.minimum(big[:-1], big[1:])
+
+    @property
+    def chains(self) -> tuple:
+        return ("decorated", "effective")
+
+    @property
+    def size(self) -> int:
+        return 2 * self.n_large - 1
+
+    @property
+    def n_observed(self) -> int:
+        return self.n_large
+
+    def granule_coordinate(self) -> tuple:
+        return np.arange(1, self.n_large + 1), "large-granule index k (decorated index 2k-1)"
+
+    def parameters(self) -> tuple:
+        return (RandomParameter("small_radius", ("gap",), "float64", _RADIUS_UNITS.replace("reference", "large-granule"),
+                                "radius of the small granule between large granules j and j+1"),)
+
+    def dims(self) -> dict:
+        return {"gap": (np.arange(1, self.n_large), "small-granule index j (between large granules j and j+1)")}
+
+    def draw(self, rng) -> dict:
+        return {"small_radius": self.distribution.sample(rng, self.n_large - 1) * self.small_scale()}
+
+    def build(self, params: dict, chain: str) -> ChainBatch:
+        chain = self._chain_name(chain)
+        small = _stack(params, "small_radius")
+        R, G = small.shape
+        big = np.broadcast_to(self.large_radii(), (R, G + 1))
+        if chain == "decorated":
+            radii = np.empty((R, 2 * G + 1))
+            radii[:, 0::2] = big
+            radii[:, 1::2] = small
+            return ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(R), np.arange(0, 2 * G + 1, 2), self.n)
+        mu, c_eff = effective_parameters(big, small, self.n)  # Eqs. (renorm-mass), (effec-int)
+        # As granchain.effective: velocity 1, or m_1 v_1 / mu_1 (momentum-conserving).
+        v0 = sphere_mass(big[:, 0]) * 1.0 / mu[:, 0] if self.momentum_conserving else np.ones(R)
+        return ChainBatch(mu, c_eff, v0, np.arange(G + 1), self.n)
+
+    def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
+        chain = self._chain_name(chain)
+        small = self.draw(realization_rng(seed, realization))["small_radius"]
+        exact = decorated(small, large_radius=self.large_radii(), n=self.n)
+        return exact if chain == "decorated" else effective(exact, momentum_conserving=self.momentum_conserving)
+
+
+@dataclass(frozen=True)
+class RandomDecorated(_Decorated):
+    """The paper's chain: N large granules of radius 1, and between each pair a small granule whose
+    radius is drawn i.i.d. from ``distribution`` (default U[0.01, 0.4], paper Sec. IV).
+
+    Chains: "decorated" (2N-1 granules, the large ones observed) and "effective" (N granules,
+    Eqs. renorm-mass, effec-int, zetak). ``momentum_conserving`` gives the effective chain's
+    granule 1 the velocity m_1 v_1 / mu_1 instead of 1 (see :func:`granchain.effective`).
+    Warns (:class:`granchain.EffectiveValidityWarning`) if the distribution reaches beyond 0.4.
+    """
+
+    n_large: int = 26
+    distribution: object = None
+    n: float = HERTZ
+    momentum_conserving: bool = False
+
+    kind: ClassVar[str] = "decorated"
+
+    def __post_init__(self):
+        self._validate(stacklevel=3)
+
+    def large_radii(self) -> np.ndarray:
+        return np.ones(self.n_large)
+
+    def small_scale(self) -> np.ndarray:
+        return np.ones(self.n_large - 1)
+
+    def draw(self, rng) -> dict:
+        return {"small_radius": self.distribution.sample(rng, self.n_large - 1)}
+
+    def describe(self) -> dict:
+        return {"family": self.kind, "n_large": self.n_large, "distribution": self.distribution.describe(), "n": self.n,
+                "momentum_conserving": self.momentum_conserving}
+
+    def label(self) -> str:
+        return f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}"
+
+    def arrival_ratio(self) -> float:
+        return 1.0
+
+
+@dataclass(frozen=True)
+class TaperedDecorated(_Decorated):
+    """A tapered decorated chain: large radii q^(k-1), k = 1..N (geometric taper by the factor q per
+    large granule: q < 1 shrinks, q > 1 grows, q = 1 is :class:`RandomDecorated` bitwise), and in
+    gap j a small granule of radius X_j min(q^(j-1), q^j), X_j i.i.d. from ``distribution``: the
+    distribution is that of the ratio of the small radius to its smaller neighbour, the ratio that
+    decides the effective description's validity.
+
+    The effective chain uses Eq. (renorm-mass) with the local large masses and the two-contacts-in-
+    series interaction for unequal neighbours (:func:`granchain.effective_parameters`).
+    """
+
+    n_large: int = 26
+    q: float = 0.95
+    distribution: object = None
+    n: float = HERTZ
+    momentum_conserving: bool = False
+
+    kind: ClassVar[str] = "tapered-decorated"
+
+    def __post_init__(self):
+        q = finite_scalar("q", self.q, positive=True)
+        object.__setattr__(self, "q", q)
+        self._validate(stacklevel=3)
+        if q ** (self.n_large - 1) < 1e-3 or q ** (self.n_large - 1) > 1e3:
+            raise ValueError(f"q = {q:g} over {self.n_large} large granules spans radii {q ** (self.n_large - 1):.3g}..1: "
+                             "choose q closer to 1 (radii within a factor 1000)")
+
+    def large_radii(self) -> np.ndarray:
+        return self.q ** np.arange(self.n_large, dtype=float)
+
+    def describe(self) -> dict:
+        return {"family": self.kind, "n_large": self.n_large, "q": self.q, "distribution": self.distribution.describe(),
+                "n": self.n, "momentum_conserving": self.momentum_conserving}
+
+    def label(self) -> str:
+        return f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}"
+
+
+# ---------------------------------------------------------------------------- undecorated families
+class _RadiiFamily(ChainFamily):
+    """Shared by families that draw every radius: one chain of ``size`` spheres, every granule observed."""
+
+    size: int
+
+    @property
+    def n_observed(self) -> int:
+        return self.size
+
+    @property
+    def chains(self) -> tuple:
+        return (self.kind,)
+
+    def granule_coordinate(self) -> tuple:
+        return np.arange(1, self.size + 1), "granule index (1-based, every granule observed)"
+
+    def radii_of(self, params: dict) -> np.ndarray:
+        """Radii (R, M) of stacked parameters."""
+        raise NotImplementedError
+
+    def build(self, params: dict, chain: str) -> ChainBatch:
+        self._chain_name(chain)
+        radii = self.radii_of(params)
+        return ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(radii.shape[0]), np.arange(self.size), self.n)
+
+    def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
+        self._chain_name(chain)
+        params = {k: np.asarray(v)[None] for k, v in self.draw(realization_rng(seed, realization)).items()}
+        return from_radii(self.radii_of(params)[0], n=self.n, kind=self.kind)
+
+
+@dataclass(frozen=True)
+class RandomRadii(_RadiiFamily):
+    """A random polydisperse chain: all ``size`` radii i.i.d. from ``distribution`` (a
+    :class:`granchain.Uniform`, :class:`granchain.Truncated` or frozen scipy.stats distribution;
+    radii in units of a reference radius), every granule observed. No small-granule checks: the
+    effective description does not apply."""
+
+    size: int = 26
+    distribution: object = None
+    n: float = HERTZ
+
+    kind: ClassVar[str] = "polydisperse"
+
+    def __post_init__(self):
+        object.__setattr__(self, "size", count("size", self.size, minimum=2))
+        if self.distribution is None:
+            raise ValueError("RandomRadii needs a radius distribution, e.g. granchain.Uniform(0.8, 1.2)")
+        object.__setattr__(self, "distribution", as_distribution(self.distribution))
+        object.__setattr__(self, "n", exponent(self.n))
+
+    def parameters(self) -> tuple:
+        return (RandomParameter("radius", ("granule",), "float64", _RADIUS_UNITS, "radius of the granule"),)
+
+    def draw(self, rng) -> dict:
+        return {"radius": self.distribution.sample(rng, self.size)}
+
+    def radii_of(self, params: dict) -> np.ndarray:
+        return _stack(params, "radius")
+
+    def describe(self) -> dict:
+        return {"family": self.kind, "size": self.size, "distribution": self.distribution.describe(), "n": self.n}
+
+    def label(self) -> str:
+        return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}"
+
+
+@dataclass(frozen=True)
+class BinaryRandom(_RadiiFamily):
+    """Binary (diatomic) disorder: ``size`` granules, each of species b (radius ``radii[1]``) with
+    probability ``p`` and of species a (``radii[0]``) otherwise, independently (cf. Ponson et al.,
+    PRE 82, 021301 (2010)). The struck granule is random too. p = 0 and p = 1 are the two
+    monodisperse chains."""
+
+    size: int = 26
+    radii: tuple = (1.0, 0.5)
+    p: float = 0.5
+    n: float = HERTZ
+
+    kind: ClassVar[str] = "binary"
+
+    def __post_init__(self):
+        object.__setattr__(self, "size", count("size", self.size, minimum=2))
+        try:
+            ra, rb = (finite_scalar("radii", r, positive=True) for r in self.radii)
+        except (TypeError, ValueError):
+            raise ValueError(f"radii must be two positive radii (R_a, R_b), got {self.radii!r}") from None
+        object.__setattr__(self, "radii", (ra, rb))
+        p = finite_scalar("p", self.p)
+        if not 0.0 <= p <= 1.0:
+            raise ValueError(f"p = {p!r} is a probability (of species b): need 0 <= p <= 1")
+        object.__setattr__(self, "p", p)
+        object.__setattr__(self, "n", exponent(self.n))
+
+    def parameters(self) -> tuple:
+        return (RandomParameter("species", ("granule",), "int8", "1", "species of the granule (0 = a, 1 = b)"),)
+
+    def draw(self, rng) -> dict:
+        return {"species": (rng.random(self.size) < self.p).astype(np.int8)}
+
+    def radii_of(self, params: dict) -> np.ndarray:
+        species = np.asarray(params["species"])
+        species = species[None] if species.ndim == 1 else species
+        return np.where(species == 1, self.radii[1], self.radii[0]).astype(float)
+
+    def describe(self) -> dict:
+        return {"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p, "n": self.n}
+
+    def label(self) -> str:
+        return f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}"
+
+
+# ---------------------------------------------------------------------------- a user's family
+@dataclass(frozen=True, init=False)
+class CustomFamily(ChainFamily):
+    """Any family a user can write as a function ``build(rng) -> radii`` (a 1-d array: a chain of
+    spheres, :func:`granchain.from_radii`) or ``build(rng) -> Chain``.
+
+    Every realisation must give a chain of the same size (and, for a Chain, the same observed
+    granules and n). The function is called once here with ``numpy.random.default_rng(0)`` to learn
+    the size, then once per realisation with ``realization_rng(seed, i)``: it must draw all its
+    randomness from that generator. Chains are built in Python, one realisation at a time (slower
+    to build than the other families, which build whole batches with NumPy), and integrated by the
+    compiled kernels like any other family. The stored record names the function and the SHA-256
+    of its source: a store resumed with an edited function is refused.
+
+    Parameters
+    ----------
+    build : callable
+        ``build(rng) -> radii`` or ``build(rng) -> granchain.Chain``.
+    name : str
+        The chain's name in the store's ``chain`` coordinate.
+    observed : sequence of int, optional
+        0-based observed granules for radii builds (default: all).
+    n : float
+        Contact exponent for radii builds (a Chain brings its own).
+    """
+
+    build_fn: Callable
+    name: str
+    observed: tuple | None
+    n: float
+    returns_chain: bool = field(repr=False)
+    _probe: Chain = field(repr=False, compare=False)
+
+    kind: ClassVar[str] = "custom"
+
+    def __init__(self, build: Callable, *, name: str = "custom", observed=None, n: float = HERTZ):
+        if not callable(build):
+            raise ValueError(f"CustomFamily needs a function build(rng) -> radii or Chain, got {build!r}")
+        if not isinstance(name, str) or not name.strip() or name in ("both",):
+            raise ValueError(f"name must be a non-empty string naming the chain, got {name!r}")
+        object.__setattr__(self, "build_fn", build)
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "n", exponent(n))
+        object.__setattr__(self, "observed", None if observed is None else tuple(int(k) for k in observed))
+        object.__setattr__(self, "returns_chain", None)
+        probe = self._make_chain(np.random.default_rng(0), "the probe call build(numpy.random.default_rng(0))")
+        object.__setattr__(self, "_probe", probe)
+
+    def _make_chain(self, rng, where: str) -> Chain:
+        out = self.build_fn(rng)
+        if self.returns_chain is None:
+            object.__setattr__(self, "returns_chain", isinstance(out, Chain))
+        if isinstance(out, Chain) != self.returns_chain:
+            raise ValueError(f"{where} returned {type(out).__name__}, but the first call returned "
+                             f"{'a Chain' if self.returns_chain else 'radii'}: return the same kind every time")
+        if isinstance(out, Chain):
+            if self.observed is not None:
+                raise ValueError("observed= is for builds that return radii; a Chain brings its own observed granules")
+            return out
+        try:
+            return from_radii(out, n=self.n, observed=self.observed, kind=self.name)
+        except ValueError as exc:
+            raise ValueError(f"{where} returned {type(out).__name__}, neither a granchain.Chain nor valid radii: {exc}") from None
+
+    @property
+    def chains(self) -> tuple:
+        return (self.name,)
+
+    @property
+    def size(self) -> int:
+        return self._probe.size
+
+    @property
+    def n_observed(self) -> int:
+        return self._probe.observed.size
+
+    def granule_coordinate(self) -> tuple:
+        return self._probe.observed + 1, "observed granule (1-based index in the chain)"
+
+    def parameters(self) -> tuple:
+        if not self.returns_chain:
+            return (RandomParameter("radius", ("site",), "float64", _RADIUS_UNITS, "radius of the granule"),)
+        return (RandomParameter("mass", ("site",), "float64", "M_1 (reference mass)", "mass of the granule"),
+                RandomParameter("stiffness", ("contact",), "float64", "1", "contact prefactor c_k (force c_k delta^(n-1))"),
+                RandomParameter("initial_velocity", (), "float64", "V_1", "velocity of granule 1 at t = 0"))
+
+    def dims(self) -> dict:
+        M = self.size
+        return {"site": (np.arange(1, M + 1), "granule index in the chain (1-based)"),
+                "contact": (np.arange(1, M), "contact between granules k and k+1")}
+
+    def draw(self, rng) -> dict:
+        ch = self._make_chain(rng, "build(rng)")
+        p = self._probe
+        if ch.size != p.size or not np.array_equal(ch.observed, p.observed) or ch.n != p.n:
+            raise ValueError(f"build(rng) gave a chain of {ch.size} granules observing {ch.observed.size} (n = {ch.n:g}); "
+                             f"every realisation must match the first: {p.size} granules, {p.observed.size} observed, n = {p.n:g}")
+        if not self.returns_chain:
+            return {"radius": ch.radii}
+        return {"mass": ch.masses, "stiffness": ch.stiffness, "initial_velocity": ch.initial_velocity}
+
+    def build(self, params: dict, chain: str) -> ChainBatch:
+        self._chain_name(chain)
+        if not self.returns_chain:
+            radii = _stack(params, "radius")
+            return ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(radii.shape[0]), self._probe.observed, self._probe.n)
+        masses, stiffness = _stack(params, "mass"), _stack(params, "stiffness")
+        return ChainBatch(masses, stiffness, np.atleast_1d(np.asarray(params["initial_velocity"], dtype=float)),
+                          self._probe.observed, self._probe.n)
+
+    def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
+        self._chain_name(chain)
+        return self._make_chain(realization_rng(seed, realization), "build(rng)")
+
+    def describe(self) -> dict:
+        fn = self.build_fn
+        try:
+            source = inspect.getsource(fn)
+        except (OSError, TypeError):
+            source = repr(fn)
+        return {"family": self.kind, "name": self.name, "build": f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', repr(fn))}",
+                "source_sha256": hashlib.sha256(source.encode()).hexdigest(), "size": self.size,
+                "returns": "chain" if self.returns_chain else "radii",
+                "observed": None if self.observed is None else list(self.observed), "n": self._probe.n}
+
+    def label(self) -> str:
+        return f"custom family {self.name!r}, M = {self.size}"
+
+
+#: Families by ``kind`` (the CLI's ``--family`` choices, and ``family`` in stored records).
+FAMILIES = {cls.kind: cls for cls in (RandomDecorated, RandomRadii, BinaryRandom, TaperedDecorated, CustomFamily)}
+
+
+def family_from_record(record: dict) -> ChainFamily:
+    """The family a stored :meth:`ChainFamily.describe` record names (not :class:`CustomFamily`,
+    whose function is not stored: pass the family itself)."""
+    record = dict(record)
+    kind = record.pop("family", None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # warned about when the ensemble was made
+        if kind == RandomDecorated.kind:
+            return RandomDecorated(record["n_large"], distribution_from_record(record["distribution"]), n=record["n"],
+                                   momentum_conserving=record["momentum_conserving"])
+        if kind == TaperedDecorated.kind:
+            return TaperedDecorated(record["n_large"], record["q"], distribution_from_record(record["distribution"]),
+                                    n=record["n"], momentum_conserving=record["momentum_conserving"])
+        if kind == RandomRadii.kind:
+            return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"])
+        if kind == BinaryRandom.kind:
+            return BinaryRandom(record["size"], tuple(record["radii"]), record["p"], n=record["n"])
+    if kind == CustomFamily.kind:
+        raise ValueError(f"a CustomFamily ({record.get('build')}) cannot be rebuilt from its record: pass the family itself")
+    raise ValueError(f"unknown chain family {kind!r}; known: {sorted(FAMILIES)}")
+

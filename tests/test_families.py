@@ -1,0 +1,381 @@
+"""Chain families in ensembles, through the integrator seam (issue: ensembles of any chain family).
+
+1. every family: row i of an ensemble is bitwise ``simulate(family.chain(seed, i), integrator)``,
+   and results do not depend on chunking, threads or a Dask cluster;
+2. the paper's family writes bitwise the stores granchain 0.1.0 wrote (fixtures in tests/data);
+3. physics of the new families (monodisperse limits, q = 1 taper);
+4. any registered integrator runs ensembles (Verlet within its own error of DP5; DOP853);
+5. records, rebuilding, the CLI and bad input.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.stats as st
+import xarray as xr
+
+import granchain as gc
+from granchain import _ensemble as ens
+from granchain.cli import main as cli_main
+
+DATA = Path(__file__).parent / "data"
+SEED = 11
+R = 20
+PER_REALISATION = ("peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end")
+
+
+def radii_of_random_length(rng):
+    """A user's family: a chain of 7 spheres whose radii shrink by a random factor."""
+    return rng.uniform(0.85, 1.0) ** np.arange(7)
+
+
+def tapered_chain(rng):
+    """A user's family returning a Chain: monodisperse masses with random contact stiffnesses."""
+    return gc.Chain(np.ones(6), rng.uniform(0.5, 1.5, 5), observed=[0, 2, 4, 5])
+
+
+FAMILIES = {
+    "decorated": lambda: gc.RandomDecorated(6),
+    "tapered-decorated": lambda: gc.TaperedDecorated(6, 0.9, gc.Uniform(0.05, 0.35)),
+    "polydisperse": lambda: gc.RandomRadii(8, gc.Uniform(0.5, 1.0)),
+    "binary": lambda: gc.BinaryRandom(8, (1.0, 0.6), 0.4),
+    "custom-radii": lambda: gc.CustomFamily(radii_of_random_length, name="shrinking"),
+    "custom-chain": lambda: gc.CustomFamily(tapered_chain, name="springs"),
+}
+
+
+def _run(family, **kw):
+    args = dict(realizations=R, seed=SEED, chunk_size=7, progress=False) | kw
+    return gc.run_ensemble(family, **args)
+
+
+def assert_same_results(a, b, names=PER_REALISATION + ("mean_velocity", "mean_velocity_stderr", "n_valid")):
+    for name in names:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """One ensemble per family, chunk_size 7, default threads."""
+    return {key: _run(make()) for key, make in FAMILIES.items()}
+
+
+# -- 1. rows are simulate(), results independent of the split ------------------------------------
+@pytest.mark.parametrize("key", FAMILIES)
+def test_rows_are_simulate_of_the_rebuilt_chain(reference, key):
+    family = FAMILIES[key]()
+    ds = reference[key]
+    integ = ens.ensemble_integrator()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gc.EffectiveValidityWarning)
+        for chain_name in family.chains:
+            for i in (0, 5, R - 1):
+                res = gc.simulate(family.chain(SEED, i, chain_name), integ, t_grid=ds["time"].values)
+                row = ds.sel(chain=chain_name).isel(realization=i)
+                np.testing.assert_array_equal(row["peak_velocity"].values, res.peak_velocity)
+                np.testing.assert_array_equal(row["peak_time"].values, res.peak_time)
+                assert int(row["status"]) == int(res.status) == 0
+                assert float(row["t_end"]) == res.t_end
+                assert abs(float(row["energy_error"]) - res.energy_error) < 1e-12
+
+
+@pytest.mark.parametrize("key", FAMILIES)
+def test_rows_are_the_batch_builder(key):
+    """The vectorised builder and the single-chain builders agree to the bit (the seam's promise)."""
+    family = FAMILIES[key]()
+    params = family.draw_batch(SEED, [3, 4])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gc.EffectiveValidityWarning)
+        for name in family.chains:
+            batch = family.build(params, name)
+            for row, i in enumerate((3, 4)):
+                chain = family.chain(SEED, i, name)
+                np.testing.assert_array_equal(batch.masses[row], chain.masses)
+                np.testing.assert_array_equal(batch.stiffness[row], chain.stiffness)
+                assert batch.initial_velocity[row] == chain.initial_velocity
+                np.testing.assert_array_equal(batch.observed, chain.observed)
+                assert batch.n == chain.n
+
+
+@pytest.mark.parametrize("key", FAMILIES)
+@pytest.mark.parametrize("chunk_size, threads", [(1, None), (64, 1), (7, 2)])
+def test_chunking_and_threads_do_not_change_results(reference, key, chunk_size, threads):
+    assert_same_results(_run(FAMILIES[key](), chunk_size=chunk_size, threads=threads), reference[key])
+
+
+def test_dask_cluster_gives_the_local_result(reference, tmp_path):
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, Client(cluster) as client:
+        for key, make in FAMILIES.items():
+            store = tmp_path / f"{key}.zarr"
+            assert_same_results(_run(make(), client=client, out=store), reference[key])
+            assert_same_results(xr.open_dataset(store, engine="zarr"), reference[key])
+
+
+# -- 2. the paper's family is bitwise the 0.1.0 stores ------------------------------------------------
+@pytest.mark.parametrize(
+    "fixture, family, seed, realizations, chunk_size",
+    [
+        ("v0.1.0-decorated-N6.zarr", lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.4)), 7, 24, 10),
+        ("v0.1.0-truncated-N5.zarr", lambda: gc.RandomDecorated(5, gc.Truncated(st.beta(2, 8), upper=0.4)), 3, 12, 5),
+    ],
+)
+def test_random_decorated_stores_equal_the_v010_fixtures(tmp_path, fixture, family, seed, realizations, chunk_size):
+    old = xr.open_dataset(DATA / fixture, engine="zarr")
+    grid = old["time"].values
+    np.testing.assert_array_equal(grid, np.round(np.arange(0.0, 20.05, 0.5), 12))
+    store = tmp_path / "new.zarr"
+    new = gc.run_ensemble(family(), realizations=realizations, seed=seed, t_grid=grid, chunk_size=chunk_size, out=store,
+                          progress=False, threads=1)
+    reread = xr.open_dataset(store, engine="zarr")
+    assert set(old.data_vars) == set(new.data_vars) == set(reread.data_vars)
+    for ds in (new, reread):
+        for name in old.data_vars:
+            assert ds[name].dims == old[name].dims and ds[name].dtype == old[name].dtype, name
+            np.testing.assert_array_equal(ds[name].values, old[name].values, err_msg=name)
+        for name in old.coords:
+            np.testing.assert_array_equal(ds[name].values, old[name].values, err_msg=name)
+
+
+def test_old_call_is_sugar_for_random_decorated(reference):
+    old_style = gc.run_ensemble(6, None, R, SEED, chunk_size=7, progress=False)
+    keyword = gc.run_ensemble(n_large=6, realizations=R, seed=SEED, chunk_size=7, progress=False)
+    assert_same_results(old_style, reference["decorated"])
+    assert_same_results(keyword, reference["decorated"])
+    assert json.loads(old_style.attrs["granchain_family"]) == gc.RandomDecorated(6).describe()
+
+
+# -- 3. physics of the new families ------------------------------------------------------------------
+def _solitary_wave(lo, hi):
+    """Amplitude (mean over granules 20..50 and 4 realisations), the largest single-granule deviation
+    from 0.6816, and the time per granule of each realisation (linear fit over the same granules)."""
+    ds = gc.run_ensemble(gc.RandomRadii(60, gc.Uniform(lo, hi)), realizations=4, seed=1, chunk_size=4, progress=False, t_grid=[0.0])
+    inner = slice(19, 50)
+    amplitude = ds["peak_velocity"].isel(chain=0, granule=inner).values
+    k = ds["granule"].values[inner]
+    slopes = np.array([np.polyfit(k, t, 1)[0] for t in ds["peak_time"].isel(chain=0, granule=inner).values])
+    return amplitude.mean(), np.abs(amplitude - 0.6816).max(), slopes
+
+
+def test_nearly_monodisperse_random_radii_carry_the_solitary_wave():
+    """Radii in [0.999, 1.001]: the monodisperse solitary wave (amplitude 0.6816, 1.1898 time units per
+    granule) within 1e-3, far from both ends. Single granules scatter by ~1e-3 around it (masses differ
+    by up to 0.6 %): that is the disorder, not an error, and stays below 2e-3."""
+    amplitude, worst, slopes = _solitary_wave(0.999, 1.001)
+    assert abs(amplitude - 0.6816) < 1e-3, amplitude
+    assert worst < 2e-3, worst
+    assert np.all(np.abs(slopes - 1.1898) < 1e-3), slopes
+    # the plain monodisperse chain gives the reference numbers
+    mono = gc.simulate(gc.monodisperse(60))
+    assert abs(mono.peak_velocity[19:50].mean() - 0.6816) < 1e-4
+    assert abs(np.polyfit(np.arange(20, 51), mono.peak_time[19:50], 1)[0] - 1.1898) < 1e-4
+    # negative control: +-5 % radii scatter the pulse far more
+    amplitude, worst, slopes = _solitary_wave(0.95, 1.05)
+    assert abs(amplitude - 0.6816) > 1e-2 and worst > 2e-2
+
+
+@pytest.mark.parametrize("p, radius", [(0.0, 1.0), (1.0, 0.6)])
+def test_binary_limits_are_the_monodisperse_chains(p, radius):
+    ds = gc.run_ensemble(gc.BinaryRandom(10, (1.0, 0.6), p), realizations=5, seed=2, chunk_size=5, progress=False)
+    np.testing.assert_array_equal(ds["species"].values, np.full((5, 10), int(p)))
+    mono = gc.simulate(gc.from_radii(np.full(10, radius)), ens.ensemble_integrator(), t_grid=ds["time"].values)
+    for i in range(5):
+        np.testing.assert_array_equal(ds["peak_velocity"].values[0, i], mono.peak_velocity)
+        np.testing.assert_array_equal(ds["peak_time"].values[0, i], mono.peak_time)
+    # all five are the same chain: the average is its trace, to the fixed-point rounding 2^-40
+    np.testing.assert_allclose(ds["mean_velocity"].values[0], mono.velocity, rtol=0, atol=2.0**-39)
+
+
+def test_binary_radii_matter():
+    """Negative control for the test above: p = 1/2 is neither monodisperse chain."""
+    ds = gc.run_ensemble(gc.BinaryRandom(10, (1.0, 0.6), 0.5), realizations=5, seed=2, chunk_size=5, progress=False)
+    assert 0 < ds["species"].values.mean() < 1
+    assert np.ptp(ds["peak_velocity"].values[0, :, -2]) > 1e-2
+
+
+def test_tapered_decorated_with_q_one_is_random_decorated(reference):
+    ds = _run(gc.TaperedDecorated(6, 1.0, gc.Uniform(0.01, 0.4)))
+    assert_same_results(ds, reference["decorated"], PER_REALISATION + ("mean_velocity", "small_radius"))
+    # a taper does change the pulse (q < 1: lighter granules ahead, the pulse speeds up)
+    tapered = _run(gc.TaperedDecorated(6, 0.8, gc.Uniform(0.01, 0.4)), chains="decorated")
+    assert np.all(tapered["peak_time"].values[0, :, -2] < reference["decorated"]["peak_time"].values[0, :, -2])
+
+
+def test_tapered_decorated_effective_chain_follows_the_decorated_one():
+    """Effective description of a tapered decorated chain (two contacts in series for unequal
+    neighbours): arrival times within 2 % of the decorated chain's."""
+    ds = _run(gc.TaperedDecorated(8, 0.9, gc.Uniform(0.01, 0.3)), realizations=10)
+    t = ds["peak_time"].isel(granule=slice(1, -1)).mean("realization")
+    rel = np.abs(t.sel(chain="effective") - t.sel(chain="decorated")) / t.sel(chain="decorated")
+    assert float(rel.max()) < 0.02, rel.values
+
+
+# -- 4. any registered integrator --------------------------------------------------------------------
+def test_verlet_ensembles_agree_with_dp5_within_verlet_error():
+    """Verlet at dt: its error is estimated by Richardson from dt and dt/2 (order 2); the difference to
+    DP5 (far more accurate) must be within 1.5x that estimate, and the estimate small."""
+    family = gc.RandomRadii(8, gc.Uniform(0.6, 1.0))
+    kw = dict(realizations=6, seed=4, chunk_size=3, progress=False, t_grid=np.arange(0.0, 20.0, 0.5))
+    dp5 = gc.run_ensemble(family, integrator=gc.DP5(1e-10, 1e-12), **kw)
+    coarse = gc.run_ensemble(family, integrator=gc.Verlet(4e-3), **kw)
+    fine = gc.run_ensemble(family, integrator=gc.Verlet(2e-3), **kw)
+    assert json.loads(coarse.attrs["granchain_integrator"]) == {"name": "verlet", "dt": 4e-3}
+    v_dp5, v_c, v_f = (d["peak_velocity"].values for d in (dp5, coarse, fine))
+    estimate = np.abs(v_c - v_f) * 4.0 / 3.0
+    assert estimate.max() < 1e-4
+    assert np.all(np.abs(v_c - v_dp5) <= 1.5 * estimate + 1e-9)
+    # the error of Verlet shrinks with its order (a Verlet that silently ran DP5 would fail here)
+    assert np.abs(v_f - v_dp5).max() < 0.4 * np.abs(v_c - v_dp5).max()
+
+
+def test_dop853_runs_ensembles_through_the_same_seam():
+    family = gc.RandomDecorated(4)
+    kw = dict(realizations=3, seed=5, chunk_size=2, progress=False, chains="effective")
+    ref = gc.run_ensemble(family, integrator=gc.DOP853(), **kw)
+    fast = gc.run_ensemble(family, integrator=gc.DP5(1e-10, 1e-12), **kw)
+    np.testing.assert_allclose(ref["peak_velocity"].values, fast["peak_velocity"].values, rtol=1e-8)
+    np.testing.assert_allclose(ref["mean_velocity"].values, fast["mean_velocity"].values, atol=1e-7)
+    assert int(ref["n_valid"][0]) == 3
+
+
+def test_ensemble_runs_without_jit(tmp_path):
+    """NUMBA_DISABLE_JIT=1: the kernels run as Python (slow) and give the compiled results."""
+    family = "gc.RandomRadii(5, gc.Uniform(0.7, 1.0))"
+    script = textwrap.dedent(f"""
+        import json, granchain as gc
+        ds = gc.run_ensemble({family}, realizations=3, seed=1, chunk_size=2, progress=False, t_grid=[0.0, 2.0, 4.0])
+        print(json.dumps(ds["peak_velocity"].values.tolist()))
+    """)
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=Path(__file__).parents[1], timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    nojit = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
+    jit = gc.run_ensemble(eval(family), realizations=3, seed=1, chunk_size=2, progress=False, t_grid=[0.0, 2.0, 4.0])
+    np.testing.assert_allclose(nojit, jit["peak_velocity"].values, rtol=1e-12)
+
+
+# -- 5. records, rebuilding, schema ------------------------------------------------------------------
+@pytest.mark.parametrize("key", [k for k in FAMILIES if not k.startswith("custom")])
+def test_family_records_rebuild_the_family(reference, key):
+    family = FAMILIES[key]()
+    record = json.loads(reference[key].attrs["granchain_family"])
+    assert record == json.loads(json.dumps(family.describe()))
+    assert gc.family_from_record(record) == family
+
+
+def test_custom_family_records_name_the_function(reference):
+    record = json.loads(reference["custom-radii"].attrs["granchain_family"])
+    assert record["build"].endswith("radii_of_random_length") and len(record["source_sha256"]) == 64
+    with pytest.raises(ValueError, match="pass the family itself"):
+        gc.family_from_record(record)
+
+
+@pytest.mark.parametrize("key", FAMILIES)
+def test_store_schema_follows_the_family(reference, key):
+    family, ds = FAMILIES[key](), reference[key]
+    assert tuple(ds["chain"].values) == family.chains
+    assert ds.sizes["granule"] == family.n_observed
+    np.testing.assert_array_equal(ds["granule"].values, family.granule_coordinate()[0])
+    for p in family.parameters():
+        assert ds[p.name].dims == ("realization",) + tuple(p.dims) and ds[p.name].dtype == np.dtype(p.dtype)
+        assert ds[p.name].attrs["units"] and ds[p.name].attrs["long_name"]
+        want = family.draw_batch(SEED, np.arange(R))[p.name]
+        np.testing.assert_array_equal(ds[p.name].values, want)
+    assert ds.attrs["family"] == family.kind
+
+
+def test_custom_family_refuses_realisations_of_another_size():
+    calls = iter(range(100))
+
+    def growing(rng):
+        return np.ones(3 + next(calls))
+
+    family = gc.CustomFamily(growing)
+    with pytest.raises(ValueError, match="every realisation must match the first"):
+        gc.run_ensemble(family, realizations=2, progress=False)
+
+
+@pytest.mark.parametrize(
+    "make, words",
+    [
+        (lambda: gc.RandomRadii(1, gc.Uniform(0.5, 1.0)), "size"),
+        (lambda: gc.RandomRadii(5), "distribution"),
+        (lambda: gc.BinaryRandom(5, (1.0, -0.5)), "radii"),
+        (lambda: gc.BinaryRandom(5, (1.0,)), "radii"),
+        (lambda: gc.BinaryRandom(5, p=1.5), "p"),
+        (lambda: gc.TaperedDecorated(6, 0.0), "q"),
+        (lambda: gc.TaperedDecorated(60, 0.5), "q"),
+        (lambda: gc.RandomDecorated(1), "n_large"),
+        (lambda: gc.RandomDecorated(5, n=1.0), "n"),
+        (lambda: gc.CustomFamily("radii"), "function"),
+        (lambda: gc.CustomFamily(lambda rng: "abc"), "neither a granchain.Chain nor valid radii"),
+        (lambda: gc.RandomDecorated(5).chain(0, 0, "polydisperse"), "builds the chains"),
+        (lambda: gc.run_ensemble(gc.RandomRadii(5, gc.Uniform(0.5, 1.0)), chains="effective", progress=False), "chains"),
+    ],
+)
+def test_bad_family_input_says_what_to_change(make, words):
+    with pytest.raises(ValueError, match=words):
+        make()
+
+
+# -- the CLI -----------------------------------------------------------------------------------------
+def _cli(capsys, *args):
+    code = cli_main(list(args))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_help_lists_families_and_integrators(capsys):
+    with pytest.raises(SystemExit):
+        cli_main(["ensemble", "--help"])
+    out = capsys.readouterr().out
+    for name in ("decorated", "tapered-decorated", "polydisperse", "binary", "dp5", "verlet", "dop853"):
+        assert f"\n  {name} " in out, name
+
+
+@pytest.mark.parametrize(
+    "args, family, integrator",
+    [
+        (["--family", "polydisperse", "--size", "6", "--alpha", "0.7", "--beta", "1.0"],
+         gc.RandomRadii(6, gc.Uniform(0.7, 1.0)), None),
+        (["--family", "binary", "--size", "6", "--radii", "1,0.7", "--p", "0.3", "--integrator", "verlet", "--step", "2e-3"],
+         gc.BinaryRandom(6, (1.0, 0.7), 0.3), gc.Verlet(2e-3)),
+        (["--family", "tapered-decorated", "--large", "4", "--q", "0.9", "--chain", "effective"],
+         gc.TaperedDecorated(4, 0.9), None),
+    ],
+)
+def test_cli_families_write_the_api_result(tmp_path, capsys, args, family, integrator):
+    store = tmp_path / "s.zarr"
+    code, out, err = _cli(capsys, "ensemble", *args, "--realizations", "5", "--chunk-size", "2", "--seed", "3",
+                          "--out", str(store), "--quiet")
+    assert code == 0, err
+    assert family.label() in out
+    ds = xr.open_dataset(store, engine="zarr")
+    chains = "effective" if "--chain" in args else "both"
+    ref = gc.run_ensemble(family, realizations=5, seed=3, chunk_size=2, chains=chains, integrator=integrator, progress=False)
+    assert_same_results(ds, ref)
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--family", "binary", "--alpha", "0.1"], "--alpha/--beta do not apply"),
+        (["--integrator", "verlet", "--rtol", "1e-6"], "--rtol does not apply"),
+        (["--family", "binary", "--radii", "1"], "two comma-separated radii"),
+        (["--family", "polydisperse", "--chain", "effective"], "chains"),
+    ],
+)
+def test_cli_bad_family_options(tmp_path, capsys, args, words):
+    code, out, err = _cli(capsys, "ensemble", *args, "--realizations", "2", "--out", str(tmp_path / "x.zarr"), "--quiet")
+    assert code == 2 and words in err, err
+    assert "Traceback" not in err
