@@ -39,3 +39,5 @@ __all__ += ["DOP853", "DP5", "INTEGRATORS", "PulseResult", "Status", "Verlet", "
 from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, EnsembleSpec, default_time_grid, run_ensemble  # noqa: E402
 
 __all__ += ["ENSEMBLE_ATOL", "ENSEMBLE_RTOL", "EnsembleSpec", "default_time_grid", "run_ensemble"]
+from .units import Material, Scale, scale, to_physical  # noqa: E402  (physical units; the rest in granchain.units)
+__all__ += ["Material", "Scale", "scale", "to_physical"]
