@@ -313,7 +313,8 @@ def scale(material: Material | str, radius: float, impact_speed: float, n: float
         if n != HERTZ:
             raise ValueError(
                 f"n = {n:g}: only n = 5/2 is Hertz's law for spheres, where a follows from E and nu; "
-                "for another n pass the contact prefactor a (force a r' delta^(n-1), in N m^(1/2 - n)) explicitly"
+                "for another n give the contact prefactor a (force a r' delta^(n-1), in N m^(1/2 - n)) explicitly: "
+                "scale(..., a=...) or, on the command line, --contact-prefactor"
             )
         a = hertz_prefactor(material)
     else:
