@@ -145,8 +145,8 @@ class Material:
         object.__setattr__(self, "nu", nu)
         if self.E < 1e5 or self.E > 2e12:
             raise ValueError(f"E = {self.E:g} Pa is outside 1e5..2e12 Pa: give Young's modulus in Pa (200 GPa = 2e11)")
-        if self.rho < 1.0 or self.rho > 3e4:
-            raise ValueError(f"rho = {self.rho:g} kg/m^3 is outside 1..30000 kg/m^3: give the density in kg/m^3 (steel: 7850)")
+        if self.rho < 50.0 or self.rho > 3e4:  # catches g/cm^3 given as kg/m^3
+            raise ValueError(f"rho = {self.rho:g} kg/m^3 is outside 50..30000 kg/m^3: give the density in kg/m^3 (steel: 7850)")
 
     @property
     def effective_modulus(self) -> float:
