@@ -16,7 +16,7 @@ Everything here is a plain function of SI floats; the rescaled data of a
 The rescaling (paper Sec. II)
 -----------------------------
 Granules of one material (density rho) repel through the potential of Eq. (hertz-1),
-V = (a/n) r'_k |y_k - y_{k+1}|^n, so the contact force is F = a r'_k delta^(n-1) with
+V = (a/n) r'_k abs(y_k - y_{k+1})^n, so the contact force is F = a r'_k delta^(n-1) with
 
     r'_k = sqrt(2 R'_k R'_{k+1} / (R'_k + R'_{k+1}))                       (r' of Sec. II)
 
@@ -64,7 +64,7 @@ Consequences for n = 5/2: alpha = (M_1 / R'_1^3) V_1^2 / a does not depend on th
 and goes as V_1^2, so L ~ R V_1^(4/5), T ~ R V_1^(-1/5), F_u ~ R^2 V_1^(6/5),
 energy ~ R^3 V_1^2.
 
-Why a small parser, not pint, for the command line: see :mod:`granchain.cli._units`.
+Why a small parser, not pint, for the command line: see the docstring of ``granchain/cli/_units.py``.
 """
 
 from __future__ import annotations
@@ -249,7 +249,7 @@ class Scale:
     energy: float
 
     def to_si(self, value, kind: str):
-        """``value`` (rescaled, scalar or array) times the unit of ``kind`` (one of :data:`QUANTITIES`)."""
+        """``value`` (rescaled, scalar or array) times the unit of ``kind`` (one of :data:`~granchain.units.QUANTITIES`)."""
         if kind not in SI_UNITS:
             raise ValueError(f"unknown quantity {kind!r}; choose one of {', '.join(QUANTITIES)}")
         return value * getattr(self, kind)
@@ -280,7 +280,7 @@ def scale(material: Material | str, radius: float, impact_speed: float, n: float
     Parameters
     ----------
     material : Material or str
-        The material (or a preset name, see :data:`MATERIALS`).
+        The material (or a preset name, see :data:`~granchain.units.MATERIALS`).
     radius : float
         Radius R'_1 of the reference granule in m (rescaled radius 1: the struck granule
         and, in a decorated chain, every large granule).
@@ -290,7 +290,7 @@ def scale(material: Material | str, radius: float, impact_speed: float, n: float
         Exponent of the potential of Eq. (hertz-1). Hertz (spheres): 5/2.
     a : float, optional
         Contact prefactor in N m^(1/2 - n). Default (n = 5/2 only): Hertz,
-        :func:`hertz_prefactor`. Required for any other n.
+        :func:`~granchain.units.hertz_prefactor`. Required for any other n.
 
     Returns
     -------
@@ -449,7 +449,7 @@ def dataset_to_physical(ds, scale: Scale):
 
 
 def to_physical(obj, scale: Scale):
-    """:func:`dataset_to_physical` for an ``xarray.Dataset``, :func:`pulse_to_physical` otherwise."""
+    """:func:`~granchain.units.dataset_to_physical` for an ``xarray.Dataset``, :func:`~granchain.units.pulse_to_physical` otherwise."""
     import xarray as xr
 
     if isinstance(obj, xr.Dataset):
