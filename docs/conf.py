@@ -38,7 +38,6 @@ nb_execution_timeout = 180              # seconds per cell; every tutorial is me
 nb_execution_show_tb = True
 nb_merge_streams = True
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence"]
-os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("TQDM_DISABLE", "1")
 
 # --- API reference from the numpydoc docstrings ----------------------------------------------

@@ -16,18 +16,18 @@ Everything here is a plain function of SI floats; the rescaled data of a
 The rescaling (paper Sec. II)
 -----------------------------
 Granules of one material (density rho) repel through the potential of Eq. (hertz-1),
-V = (a/n) r'_k abs(y_k - y_{k+1})^n, so the contact force is F = a r'_k delta^(n-1) with
+V = (a/n) r'_k abs(y_k - y_{k+1})^n, so the contact force is F = a r'_k delta^(n-1) with::
 
     r'_k = sqrt(2 R'_k R'_{k+1} / (R'_k + R'_{k+1}))                       (r' of Sec. II)
 
 (R'_k the physical radii, so r' has units m^(1/2) and a has units N m^(1/2 - n)).
-With M_k = (4/3) pi rho R'_k^3 and the dimensionless
+With M_k = (4/3) pi rho R'_k^3 and the dimensionless::
 
     alpha = M_1 V_1^2 / (a R'_1^(n + 1/2))                                  (Sec. II)
 
 the substitutions y = R'_1 alpha^(1/n) x, tau = (R'_1 / V_1) alpha^(1/n) t,
 R'_k = R'_1 R_k, M_k = M_1 m_k turn Eq. (EOM-1) into Eq. (motion_rescaled). The units of
-the rescaled variables are therefore
+the rescaled variables are therefore::
 
     length    L = R'_1 alpha^(1/n)             (displacements x, compressions delta)
     time      T = (R'_1 / V_1) alpha^(1/n)     (t, peak times)
@@ -45,12 +45,12 @@ Which ``a`` (Hertz, n = 5/2)
 ----------------------------
 Two elastic spheres of one material pressed together by delta repel with the Hertz force
 (Landau & Lifshitz, *Theory of Elasticity*, Sec. 9; K. L. Johnson, *Contact Mechanics*,
-Cambridge 1985, Sec. 4.2)
+Cambridge 1985, Sec. 4.2)::
 
     F = (4/3) E* R_eff^(1/2) delta^(3/2),   1/E* = 2 (1 - nu^2) / E,
     R_eff = R'_k R'_{k+1} / (R'_k + R'_{k+1}).
 
-Eq. (r-prime) has r' = sqrt(2 R_eff), so matching F = a r' delta^(3/2) gives
+Eq. (r-prime) has r' = sqrt(2 R_eff), so matching F = a r' delta^(3/2) gives::
 
     a = (4/3) E* / sqrt(2) = (4/3) E / (2 sqrt(2) (1 - nu^2)) = sqrt(2) E / (3 (1 - nu^2)),
 
@@ -150,7 +150,7 @@ class Material:
 
     @property
     def effective_modulus(self) -> float:
-        """E* of two spheres of this material, 1/E* = 2 (1 - nu^2) / E (Johnson, Contact Mechanics, Eq. 4.22)."""
+        """E* of two spheres of this material, 1/E* = 2 (1 - nu^2) / E (K. L. Johnson, Contact Mechanics, Sec. 4.2)."""
         return self.E / (2.0 * (1.0 - self.nu**2))
 
 

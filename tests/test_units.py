@@ -107,7 +107,7 @@ def test_solitary_wave_speed_is_nesterenko():
     """A monodisperse steel chain (R = 5 mm, V_1 = 1 m/s), in SI units.
 
     Nesterenko's long-wavelength solitary wave (Dynamics of Heterogeneous Materials,
-    Springer 2001, Sec. 1.3): V_s = (2/sqrt(5)) c xi_m^(1/4), with c^2 = A D^(5/2) / M
+    Springer 2001, Ch. 1): V_s = (2/sqrt(5)) c xi_m^(1/4), with c^2 = A D^(5/2) / M
     (F = A delta^(3/2), D = 2R; c^2 = 2E / (pi rho (1 - nu^2))) and xi_m the maximum strain.
     In a travelling wave the particle velocity is v = V_s xi, so for the velocity amplitude
     v_m: V_s = (16/25)^(1/5) c^(4/5) v_m^(1/5). (In force amplitude this is
