@@ -24,6 +24,7 @@ from .families import (
     family_from_record,
 )
 from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, EnsembleSpec, default_time_grid, run_ensemble
+from .units import Material, Scale, scale, to_physical  # physical units; the rest in granchain.units
 
 __all__ = [
     "BinaryRandom",
@@ -40,10 +41,12 @@ __all__ = [
     "FAMILIES",
     "INTEGRATORS",
     "Integrator",
+    "Material",
     "PulseResult",
     "RandomDecorated",
     "RandomRadii",
     "RunControls",
+    "Scale",
     "Status",
     "TaperedDecorated",
     "Truncated",
@@ -65,8 +68,10 @@ __all__ = [
     "realization_rng",
     "regular_decorated",
     "run_ensemble",
+    "scale",
     "simulate",
     "small_radius_distribution",
     "sphere_stiffness",
     "tapered",
+    "to_physical",
 ]

@@ -7,6 +7,8 @@ import sys
 
 import numpy as np
 
+from ._units import add_unit_arguments, scale_from_args
+
 
 def _floats(text: str) -> list[float]:
     try:
@@ -34,7 +36,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--rtol", type=float, help="relative tolerance (dp5, dop853)")
     p.add_argument("--atol", type=float, help="absolute tolerance (dp5, dop853)")
     p.add_argument("--dt", type=float, help="time step (verlet)")
-    p.add_argument("--json", action="store_true", help='print {"granule": [...], "peak_velocity": [...], "peak_time": [...]} only')
+    p.add_argument("--json", action="store_true", help=(
+        'print {"granule": [...], "peak_velocity": [...], "peak_time": [...]} only (rescaled); with physical units '
+        'also "physical": {"peak_velocity_m_s", "peak_time_s", ..., "scale": {...}}'))
+    add_unit_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -51,9 +56,18 @@ def _integrator(args):
         raise ValueError(f"integrator {cls.name} does not take {sorted(kwargs)}") from None
 
 
+def _physical_table(phys, labels) -> str:
+    lines = [f"{'granule':>8} {'peak_velocity [m/s]':>20} {'peak_time [s]':>14}"]
+    for k, vp, tp in zip(labels, phys.peak_velocity, phys.peak_time):
+        lines.append(f"{k:8d} {vp:20.9g} {tp:14.6e}")
+    lines.append(f"# physical units: {phys.scale}")
+    return "\n".join(lines)
+
+
 def run(args) -> int:
     import granchain as gc
 
+    units = scale_from_args(args)  # None without unit options; checked before integrating
     if args.small_radii is not None:
         chain = gc.decorated(_floats(args.small_radii), n=args.n)
         if args.effective:
@@ -66,16 +80,22 @@ def run(args) -> int:
     # Decorated (and effective) chains are reported by large-granule index k = 1..N
     # (decorated chain index 2k - 1); a chain from --radii by its own index.
     labels = np.arange(1, result.granule.size + 1) if args.small_radii is not None else result.granule
+    phys = None if units is None else gc.units.pulse_to_physical(result, units)
     if args.json:
-        print(json.dumps({
+        out = {
             "granule": [int(k) for k in labels],
             "peak_velocity": [float(v) for v in result.peak_velocity],
             "peak_time": [float(t) for t in result.peak_time],
-        }))
+        }
+        if phys is not None:
+            out["physical"] = {**phys.as_dict(), "scale": units.as_dict()}
+        print(json.dumps(out))
     else:
         print(result.table(labels))
         if args.small_radii is not None:
             print("# granule = large-granule index k (decorated chain index 2k - 1)")
+        if phys is not None:
+            print(_physical_table(phys, labels))
     if not result.ok:
         print(f"warning: {result.status.name}: {result.message}", file=sys.stderr)
         return 1
