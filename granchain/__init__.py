@@ -21,6 +21,7 @@ from .families import (
     RandomDecorated,
     RandomRadii,
     TaperedDecorated,
+    family_from_dataset,
     family_from_record,
 )
 from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, EnsembleSpec, default_time_grid, run_ensemble
@@ -60,6 +61,7 @@ __all__ = [
     "draw_small_radii",
     "effective",
     "effective_parameters",
+    "family_from_dataset",
     "family_from_record",
     "from_radii",
     "get_integrator",

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import json
 import warnings
 from dataclasses import dataclass, field
 from typing import Callable, ClassVar, NamedTuple
@@ -48,6 +49,7 @@ __all__ = [
     "RandomParameter",
     "RandomRadii",
     "TaperedDecorated",
+    "family_from_dataset",
     "family_from_record",
 ]
 
@@ -634,3 +636,20 @@ def family_from_record(record: dict) -> ChainFamily:
         raise ValueError(f"a CustomFamily ({record.get('build')}) cannot be rebuilt from its record: pass the family itself")
     raise ValueError(f"unknown chain family {kind!r}; known: {sorted(FAMILIES)}")
 
+
+
+def family_from_dataset(ds) -> ChainFamily:
+    """The family of an ensemble Dataset (``run_ensemble``'s result or a store opened with xarray),
+    rebuilt from its stored record. A store written by granchain 0.1.0 holds no family record: its
+    parameters then describe the :class:`RandomDecorated` it was. Raises ValueError for a
+    :class:`CustomFamily` (its function is not stored) or a Dataset that is no ensemble."""
+    record = ds.attrs.get("granchain_family")
+    if record is not None:
+        return family_from_record(json.loads(record))
+    params = json.loads(ds.attrs.get("granchain_parameters", "{}"))
+    if "n_large" in params and "distribution" in params:  # granchain 0.1.0
+        return family_from_record({"family": RandomDecorated.kind, "n_large": params["n_large"],
+                                   "distribution": params["distribution"], "n": params.get("n", HERTZ),
+                                   "momentum_conserving": bool(params.get("momentum_conserving", False))})
+    raise ValueError("this Dataset holds no granchain family record (granchain_family attribute): "
+                     "is it an ensemble written by granchain.run_ensemble?")

@@ -271,6 +271,23 @@ def test_family_records_rebuild_the_family(reference, key):
     record = json.loads(reference[key].attrs["granchain_family"])
     assert record == json.loads(json.dumps(family.describe()))
     assert gc.family_from_record(record) == family
+    assert gc.family_from_dataset(reference[key]) == family
+
+
+@pytest.mark.parametrize("fixture, family", [
+    ("v0.1.0-decorated-N6.zarr", gc.RandomDecorated(6, gc.Uniform(0.01, 0.4))),
+    ("v0.1.0-truncated-N5.zarr", gc.RandomDecorated(5, gc.Truncated(st.beta(2, 8), upper=0.4))),
+])
+def test_family_of_a_v010_store_is_recovered(fixture, family):
+    """Stores written before families existed still say which family they are (Fig. 3 needs the distribution)."""
+    ds = xr.open_dataset(DATA / fixture, engine="zarr")
+    assert "granchain_family" not in ds.attrs
+    assert gc.family_from_dataset(ds) == family
+
+
+def test_family_of_a_dataset_without_record_is_refused():
+    with pytest.raises(ValueError, match="no granchain family record"):
+        gc.family_from_dataset(xr.Dataset())
 
 
 def test_custom_family_records_name_the_function(reference):
