@@ -70,8 +70,15 @@ def _range_mask(granule, fit_range):
 
 
 def _pulse_fit(ds, quantity, chain, fit_range, stat, sums) -> PulseFit:
-    jk = pulse_jackknife(ds, lambda m: stat(m, full=False), sums)
     fit = stat(pulse_means(ds), full=True)
+
+    def replicate(m):
+        try:
+            return stat(m, full=False)
+        except RuntimeError:  # a replicate whose fit does not converge: its stderr becomes NaN, never silently small
+            return np.full(len(fit.params), np.nan)
+
+    jk = pulse_jackknife(ds, replicate, sums)
     if sums is None:
         err, method, corr = fit.errors, RESIDUALS, fit.correlation
     else:

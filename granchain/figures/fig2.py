@@ -119,6 +119,7 @@ def plot(data: Fig2Data, ax=None):
     ax.set_ylim(0, 1.12)
     ax.legend(loc="upper right", fontsize=7, frameon=False, ncols=1)
     ax.tick_params(labelbottom=True)
+    ax.set_xlabel(r"large-granule index $k$")
 
     inset = ax.inset_axes([0.08, 0.07, 0.34, 0.33])
     p = data.peaks[main]

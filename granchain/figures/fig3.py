@@ -119,6 +119,7 @@ def plot(data: Fig3Data, ax=None):
                  f"fit range k = {lo}..{hi} between the vertical lines", fontsize=9.5)
     ax.legend(loc="upper left", fontsize=7, frameon=False)
     ax.tick_params(labelbottom=True)
+    ax.set_xlabel(r"large-granule index $k$")
 
     kk = data.granule[1:-1].astype(float)
     low.plot(kk, analysis.PAPER_FIG3[0] * kk + analysis.PAPER_FIG3[1] - f.fit(kk), color=COLORS["paper"], ls=":", lw=2,
