@@ -10,7 +10,13 @@
   different amplitudes :func:`mean_peak_amplitude` (<max_t v_k>) and
   :func:`averaged_pulse_peak` (max_t <v_k(t)>, the paper's Fig. 2), plus
   :func:`mean_arrival_time`, :func:`arrival_times`, :func:`out_of_order_peaks`;
-* :func:`compare_curves` - fitted curves, not their strongly correlated parameters.
+* :func:`compare_curves` - fitted curves, not their strongly correlated parameters;
+* robust statistics: :func:`quantile_skewness`; :func:`format_pvalue` (bounds at the Monte
+  Carlo floor);
+* jackknife errors over blocks of realisations or chunks of a store (:func:`block_jackknife`,
+  :class:`ChunkSums`, :func:`chunk_jackknife`) and the paper's unweighted averaged-pulse fits
+  with them (:func:`fit_averaged_decay`, :func:`fit_averaged_arrival`,
+  :func:`paper_curve_agreement`, :func:`averaged_peak_gap`).
 """
 
 from __future__ import annotations
@@ -25,8 +31,12 @@ __all__ = [
     "PAPER_FIG2", "PAPER_FIG2_INSET", "PAPER_FIG3",
     "StretchedExpFit", "LinearFit", "Histogram", "KSResult", "PerGranule", "PulsePeak",
     "CurveComparison", "stretched_exp", "fit_stretched_exp", "fit_linear", "histogram",
-    "ks_distance", "ks_normal", "skewness", "mean_peak_amplitude", "averaged_pulse_peak",
+    "ks_distance", "ks_normal", "skewness", "quantile_skewness", "format_pvalue", "pulse_peak", "mean_peak_amplitude", "averaged_pulse_peak",
     "mean_arrival_time", "arrival_times", "out_of_order_peaks", "compare_curves",
+    # jackknife (granchain._jackknife) and averaged-pulse fits (granchain._pulsefits)
+    "Jackknife", "ChunkSums", "block_labels", "jackknife_stderr", "block_jackknife", "chunk_jackknife",
+    "PulseFit", "CurveAgreement", "pulse_means", "pulse_jackknife", "fit_averaged_decay", "fit_averaged_arrival",
+    "paper_curve_agreement", "rounding_envelope", "averaged_peak_gap",
 ]
 
 #: Paper Fig. 2: averaged-pulse peak v_k = a exp(-b k^c), N = 26, fit range about k = 4..25.
@@ -334,8 +344,44 @@ def ks_distance(sample) -> float:
 
 
 def skewness(sample, *, bias=False) -> float:
-    """Sample skewness (``scipy.stats.skew``); ``bias=False`` gives the corrected G1."""
+    """Sample skewness (``scipy.stats.skew``); ``bias=False`` gives the corrected G1.
+
+    The third moment is dominated by a few outliers in a long tail; see
+    :func:`quantile_skewness` for a robust companion.
+    """
     return float(stats.skew(_sample(sample, 3), bias=bias))
+
+
+def quantile_skewness(sample, p=0.25) -> float:
+    """Robust (quantile) skewness (Q(1-p) + Q(p) - 2 Q(1/2)) / (Q(1-p) - Q(p)).
+
+    Bowley's coefficient for p = 1/4 (Hinkley 1975 for general p): in [-1, 1], 0 for any
+    symmetric distribution, insensitive to the outermost fraction p of each tail. For a
+    normal sample it is 0; for an exponential one (p = 1/4) it is ln(4/3) / ln 3 = 0.2619.
+    """
+    x = _sample(sample, 3)
+    if not 0 < p < 0.5:
+        raise ValueError(f"p must lie in (0, 1/2), got {p!r}")
+    lo, med, hi = np.quantile(x, [p, 0.5, 1 - p])
+    if hi == lo:
+        raise ValueError(f"the {p:g} and {1 - p:g} quantiles coincide: quantile skewness undefined")
+    return float((hi + lo - 2 * med) / (hi - lo))
+
+
+def format_pvalue(p, n_mc_samples) -> str:
+    """A Monte Carlo p-value as text: a bound "< 1/(B+1)" at the Monte Carlo floor.
+
+    With B resamples the smallest estimate is 1/(B+1) (no resample reached the observed
+    statistic): the p-value is then only known to be below about that, and printing
+    "0.000999" would claim a precision the test does not have.
+    """
+    B = int(n_mc_samples)
+    if B <= 0 or not np.isfinite(p):
+        return "not computed"
+    floor = 1.0 / (B + 1)
+    if p <= floor * (1 + 1e-9):
+        return f"< 1/(B+1) = {floor:.2g} (B = {B})"
+    return f"{p:.2g} (B = {B})"
 
 
 @dataclass(frozen=True)
@@ -354,6 +400,16 @@ class KSResult:
     skewness: float
     excess_kurtosis: float
     n_mc_samples: int
+
+    @property
+    def at_floor(self) -> bool:
+        """True if no Monte Carlo resample reached d: the p-value is a bound, < 1/(B+1)."""
+        return self.n_mc_samples > 0 and self.pvalue <= (1 + 1e-9) / (self.n_mc_samples + 1)
+
+    @property
+    def pvalue_text(self) -> str:
+        """:func:`format_pvalue` of this p-value."""
+        return format_pvalue(self.pvalue, self.n_mc_samples)
 
 
 def ks_normal(sample, *, n_mc_samples=500, rng=0, batch=100) -> KSResult:
@@ -481,12 +537,18 @@ class PulsePeak:
     refined: np.ndarray
 
 
-def averaged_pulse_peak(ds, chain="decorated") -> PulsePeak:
-    """max_t <v_k(t)> and argmax_t, per granule, with quadratic refinement (paper Fig. 2)."""
-    sub = _chain(ds, chain, ("mean_velocity", "mean_velocity_stderr"))
-    t = np.asarray(sub["time"].values, dtype=float)
-    v = sub["mean_velocity"].transpose("granule", "time").values.astype(float)
-    e = sub["mean_velocity_stderr"].transpose("granule", "time").values.astype(float)
+def pulse_peak(time, mean, stderr=None):
+    """max_t and argmax_t of averaged pulses ``mean`` (granule, time) on the grid ``time``.
+
+    The maximum is located between grid points by the parabola through the three samples
+    around the grid maximum. Returns (velocity, time, refined, velocity_stderr) arrays per
+    granule; ``refined`` is False where that was impossible (maximum at the grid's edge, as
+    for the struck granule k = 1, or a flat top); ``velocity_stderr`` is ``stderr``
+    interpolated at the peak time (NaN without ``stderr``).
+    """
+    t = np.asarray(time, dtype=float)
+    v = np.asarray(mean, dtype=float)
+    e = np.full_like(v, np.nan) if stderr is None else np.asarray(stderr, dtype=float)
     if t.size < 3 or np.any(np.diff(t) <= 0):
         raise ValueError("the time grid must be strictly increasing with at least 3 points")
     rows = np.arange(v.shape[0])
@@ -511,8 +573,16 @@ def averaged_pulse_peak(ds, chain="decorated") -> PulsePeak:
     frac = (ts - t[lo]) / (t[lo + 1] - t[lo])
     ep = np.where(ok, e[rows, lo] + frac * (e[rows, lo + 1] - e[rows, lo]), ep)
     nan = np.where(finite, 1.0, np.nan)
-    return PulsePeak(chain, _frozen(sub["granule"].values), _frozen(vp * nan), _frozen(ep * nan),
-                     _frozen(ts * nan), refined)
+    return vp * nan, ts * nan, refined, ep * nan
+
+
+def averaged_pulse_peak(ds, chain="decorated") -> PulsePeak:
+    """max_t <v_k(t)> and argmax_t, per granule, with quadratic refinement (paper Fig. 2)."""
+    sub = _chain(ds, chain, ("mean_velocity", "mean_velocity_stderr"))
+    v = sub["mean_velocity"].transpose("granule", "time").values.astype(float)
+    e = sub["mean_velocity_stderr"].transpose("granule", "time").values.astype(float)
+    vp, ts, refined, ep = pulse_peak(sub["time"].values, v, e)
+    return PulsePeak(chain, _frozen(sub["granule"].values), _frozen(vp), _frozen(ep), _frozen(ts), refined)
 
 
 def out_of_order_peaks(ds, chain="decorated") -> PerGranule:
@@ -563,3 +633,13 @@ def compare_curves(f, g, x) -> CurveComparison:
         pull = float(np.max(diff / np.sqrt(var))) if np.ndim(var) else float("nan")
     i = int(np.nanargmax(rel))
     return CurveComparison(float(rel[i]), float(x[i]), float(np.max(diff)), pull)
+
+
+# Re-exports at the end: these modules build on the functions above.
+from ._jackknife import (  # noqa: E402
+    ChunkSums, Jackknife, block_jackknife, block_labels, chunk_jackknife, jackknife_stderr,
+)
+from ._pulsefits import (  # noqa: E402
+    CurveAgreement, PulseFit, averaged_peak_gap, fit_averaged_arrival, fit_averaged_decay,
+    paper_curve_agreement, pulse_jackknife, pulse_means, rounding_envelope,
+)

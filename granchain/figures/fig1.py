@@ -41,22 +41,33 @@ def compute(ds, granules=None) -> Fig1Data:
 
 
 def plot(data: Fig1Data, ax=None):
-    fig, ax = axes(ax, figsize=(7.0, 4.4))
-    cmap = __import__("matplotlib").colormaps["viridis"]
+    """<v_k(t)> per granule, colour coded by k (colour bar), effective chain in thin black."""
+    import matplotlib as mpl
+
+    fig, ax = axes(ax, figsize=(7.4, 4.6))
+    cmap = mpl.colormaps["viridis"]
     K = len(data.granule)
+    norm = mpl.colors.Normalize(vmin=float(data.granule[0]), vmax=float(data.granule[-1]))
     for i, k in enumerate(data.granule):
-        ax.plot(data.time, data.decorated[i], color=cmap(i / max(K - 1, 1)), lw=1.6,
-                label="decorated chain" if i == 0 else None)
+        ax.plot(data.time, data.decorated[i], color=cmap(norm(k)), lw=1.8)
         if data.effective is not None:
-            ax.plot(data.time, data.effective[i], color=COLORS["effective"], lw=0.8, ls="-",
-                    label="effective chain" if i == 0 else None)
+            ax.plot(data.time, data.effective[i], color=COLORS["effective"], lw=0.7, ls="-")
         j = int(np.nanargmax(data.decorated[i]))
         if K <= 30:
-            ax.annotate(f"{k}", (data.time[j], data.decorated[i, j]), textcoords="offset points", xytext=(0, 3),
-                        ha="center", fontsize=7)
+            ax.annotate(f"{k}", (data.time[j], data.decorated[i, j]), textcoords="offset points", xytext=(0 if j else 5, 3),
+                        ha="center" if j else "left", fontsize=7)
+    # legend: one entry per kind of curve (the colour of each granule is on the colour bar)
+    ax.plot([], [], color=cmap(0.5), lw=1.8, label="decorated chain (colour: granule k)")
+    if data.effective is not None:
+        ax.plot([], [], color=COLORS["effective"], lw=0.7, label="effective chain (black)")
     ax.set_xlabel(TIME_LABEL)
     ax.set_ylabel(r"averaged velocity $\langle v_k(t)\rangle$ " + VELOCITY_UNITS)
     ax.set_title(f"Averaged velocity of the large granules, N = {K} ({data.realizations} realisations)", fontsize=10)
-    ax.set_xlim(data.time[0], data.time[-1])
-    ax.legend(loc="center right", frameon=False)
+    span = data.time[-1] - data.time[0]
+    ax.set_xlim(data.time[0] - 0.01 * span, data.time[-1])
+    low = np.nanmin([np.nanmin(data.decorated)] + ([] if data.effective is None else [np.nanmin(data.effective)]))
+    ax.set_ylim(min(-0.02, low - 0.03), 1.12)
+    ax.legend(loc="upper right", frameon=False, fontsize=8)
+    cb = fig.colorbar(mpl.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, pad=0.01)
+    cb.set_label("large-granule index $k$ (label at each peak)")
     return fig

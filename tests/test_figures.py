@@ -1,0 +1,102 @@
+"""Each paper figure at low resolution: compute, plot, no overlapping text, every axis labelled."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import xarray as xr  # noqa: E402
+
+import granchain as gc  # noqa: E402
+from granchain import analysis  # noqa: E402
+from granchain._ensemble import default_time_grid  # noqa: E402
+from granchain.figures import fig1, fig2, fig3, fig4  # noqa: E402
+from granchain.figures._style import text_overlaps  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def stores(tmp_path_factory):
+    """Tiny ensembles (both chains) written as stores with 8 chunks each: N -> (Dataset, ChunkSums)."""
+    root = tmp_path_factory.mktemp("fig-stores")
+    out = {}
+    for N, R in ((6, 40), (11, 40), (16, 24), (26, 32)):
+        path = root / f"N{N:02d}.zarr"
+        gc.run_ensemble(N, gc.Uniform(0.01, 0.4), R, 100 + N, "both", t_grid=default_time_grid(N),
+                        chunk_size=R // 8, out=path, progress=False)
+        out[N] = (xr.open_zarr(path).load(), analysis.ChunkSums.from_store(path))
+    return out
+
+
+def _check(fig):
+    fig.canvas.draw()
+    assert text_overlaps(fig) == []
+    for ax in fig.axes:
+        if ax.get_label() == "<colorbar>":
+            assert ax.get_ylabel()
+            continue
+        assert ax.get_xlabel().strip(), f"axes {ax.get_title()!r} has no x label"
+        assert ax.get_ylabel().strip(), f"axes {ax.get_title()!r} has no y label"
+        for child in ax.child_axes:  # insets
+            assert child.get_xlabel().strip() and child.get_ylabel().strip()
+    plt.close(fig)
+
+
+def test_overlap_detector_detects_overlap():
+    fig, ax = plt.subplots()
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.text(0.5, 0.5, "some text", transform=ax.transAxes)
+    ax.text(0.52, 0.5, "other text", transform=ax.transAxes)
+    assert text_overlaps(fig)
+    plt.close(fig)
+
+
+def test_fig1(stores):
+    data = fig1.compute(stores[11][0])
+    assert data.decorated.shape == data.effective.shape == (11, stores[11][0].sizes["time"])
+    _check(fig1.plot(data))
+    data.to_dataset()
+
+
+def test_fig2_jackknife_and_fallback(stores):
+    ds, sums = stores[26]
+    data = fig2.compute(ds, sums=sums)
+    assert data.fit_range == (4, 25) and data.main == "effective"
+    f = data.fit_k["effective"]
+    assert "jackknife" in f.method and f.fit.sigma is None  # unweighted, as the paper
+    assert np.all(np.isfinite(f.stderr))
+    _check(fig2.plot(data))
+    mem = fig2.compute(ds)  # no chunk sums: residual errors, labelled
+    assert "residuals" in mem.fit_k["effective"].method
+    assert mem.fit_k["effective"].params == pytest.approx(f.params, rel=1e-12)
+    data.to_dataset()
+
+
+def test_fig3_default_range_and_slope_function(stores):
+    ds, sums = stores[26]
+    data = fig3.compute(ds, sums=sums)
+    assert data.fit_range == (2, 25)
+    assert data.S == pytest.approx(fig3._bca_slope(ds)) and data.S == pytest.approx(2.3482, abs=1e-4)
+    assert np.all(np.isfinite(data.pulse_time_stderr["effective"][1:]))
+    _check(fig3.plot(data))
+    data.to_dataset()
+
+
+def test_fig4_clockwise_order_common_range_and_sign(stores):
+    data = fig4.compute({N: s[0] for N, s in stores.items()}, n_mc_samples=20, n_blocks=4)
+    assert [p.N for p in data.panels] == [6, 11, 16, 26]
+    for p in data.panels:
+        assert np.array_equal(p.hist_numerics.edges, p.hist_theory.edges)
+        assert p.numerics.size == p.theory.size
+        assert p.stats["shift"].value == pytest.approx(p.shifted.shift)
+    fig = fig4.plot(data)
+    fig.canvas.draw()
+    centre = {p.N: ax.get_position() for p, ax in zip(data.panels, fig.axes)}
+    assert centre[6].y0 > centre[26].y0 and centre[6].x0 < centre[11].x0      # 6 upper left, 11 upper right
+    assert centre[16].x0 > centre[26].x0 and centre[16].y0 < centre[11].y0    # 16 lower right, 26 lower left
+    _check(fig)
+    data.to_dataset()
