@@ -590,7 +590,8 @@ def out_of_order_peaks(ds, chain="decorated") -> PerGranule:
 
     A proxy for the rare genuine double peaks (DESIGN.md Sec. 2): a later, higher hump at k
     moves max_t v_k after the pulse has already reached k + 1. It misses double peaks that
-    stay in order; the integrator's own count is authoritative. ``value`` is the count,
+    stay in order. It is the only count granchain has: the kernels record one maximum per
+    granule (with the tie rule of ``peak_rtol``) and do not count separate humps. ``value`` is the count,
     ``stderr`` its Poisson error sqrt(count); the last granule has count 0 by definition.
     """
     sub = _chain(ds, chain, ("status", "peak_time"))

@@ -4,7 +4,7 @@ An ensemble (:func:`granchain.run_ensemble`) is a *family* of random chains of o
 size. A family says
 
 * which random parameters realisation i draws from its generator
-  ``realization_rng(seed, i)`` (:meth:`ChainFamily.parameters`, :meth:`ChainFamily.draw`;
+  ``realization_rng(seed, i)`` (:meth:`ChainFamily.parameters`, :meth:`ChainFamily.draw`, :class:`RandomParameter`;
   they are stored per realisation, so any row of a store can be rebuilt);
 * how a batch of those parameters becomes the one chain representation, batched
   (:meth:`ChainFamily.build`: masses, stiffnesses, initial velocities, observed granules),
@@ -118,7 +118,7 @@ class ChainFamily:
         raise NotImplementedError
 
     def parameters(self) -> tuple:
-        """The :class:`RandomParameter` records of what :meth:`draw` returns."""
+        """The :class:`granchain.families.RandomParameter` records of what :meth:`draw` returns."""
         raise NotImplementedError
 
     def dims(self) -> dict:

@@ -396,3 +396,22 @@ def test_cli_bad_family_options(tmp_path, capsys, args, words):
     code, out, err = _cli(capsys, "ensemble", *args, "--realizations", "2", "--out", str(tmp_path / "x.zarr"), "--quiet")
     assert code == 2 and words in err, err
     assert "Traceback" not in err
+
+
+# -- analysis and figures read the stored family -------------------------------------------------------
+def test_fig3_uses_the_slope_of_the_stored_distribution():
+    """Fig. 3 of an ensemble with a Truncated distribution: S = bca.slope(that distribution), not the
+    paper's uniform S (0.1.0 used U[0.01, 0.4] whatever the ensemble drew)."""
+    from granchain import bca
+    from granchain.figures import fig3
+
+    dist = gc.Truncated(st.beta(2, 8), upper=0.4)
+    ds = gc.run_ensemble(gc.RandomDecorated(6, dist), realizations=30, seed=2, chunk_size=10, progress=False)
+    data = fig3.compute(ds, fit_range=(2, 5))
+    assert data.S == bca.slope(dist)
+    assert abs(data.S - bca.slope_uniform(0.01, 0.4)) > 0.02  # the wrong answer differs by 1.4 %
+    # a 0.1.0 store holds no family record: its parameters still name the distribution
+    old = xr.open_dataset(DATA / "v0.1.0-truncated-N5.zarr", engine="zarr")
+    assert fig3._bca_slope(old) == bca.slope(dist)
+    uniform = xr.open_dataset(DATA / "v0.1.0-decorated-N6.zarr", engine="zarr")
+    assert fig3._bca_slope(uniform) == bca.slope_uniform(0.01, 0.4)

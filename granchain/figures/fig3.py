@@ -21,9 +21,21 @@ from ._style import COLORS, MARKERS, TIME_LABEL
 
 
 def _bca_slope(ds) -> float:
-    """The BCA slope S (Eq. slope) for the Dataset's small-radius distribution."""
-    alpha, beta = float(ds.attrs.get("alpha", 0.01)), float(ds.attrs.get("beta", 0.4))
-    return bca.slope_uniform(alpha, beta, n=float(ds.attrs.get("n", 2.5)))
+    """The BCA slope S (Eq. slope) for the small-radius distribution of the store's family
+    (read from the stored record, :func:`granchain.family_from_dataset`): the closed form for a
+    uniform distribution, quadrature (:func:`granchain.bca.slope`) for any other. NaN for a
+    family Eq. (slope) does not describe (it assumes unit large granules: undecorated and tapered
+    families)."""
+    from .._distributions import Uniform
+    from ..families import RandomDecorated, family_from_dataset
+
+    family = family_from_dataset(ds)
+    if not isinstance(family, RandomDecorated):
+        return float("nan")
+    dist = family.distribution
+    if isinstance(dist, Uniform):
+        return bca.slope_uniform(dist.alpha, dist.beta, n=family.n)
+    return bca.slope(dist, n=family.n)
 
 
 @dataclass(frozen=True, eq=False)
