@@ -14,8 +14,6 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 from . import __version__, analysis
 from ._distributions import Uniform
 from ._ensemble import default_time_grid, run_ensemble

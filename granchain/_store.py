@@ -145,7 +145,6 @@ def empty_dataset(spec, lazy: bool):
     import xarray as xr
 
     sizes = _sizes(spec)
-    full = np.full
     if lazy:
         import dask.array as da
 

@@ -20,6 +20,18 @@ def axes(ax=None, figsize=(6.4, 4.4)):
     return fig, ax
 
 
+def panel_pair(ax=None, figsize=(7.0, 7.0), height_ratios=(1.4, 1)):
+    """(figure, main axes, lower axes): a main panel over a residual panel sharing x, or the
+    pair ``ax`` = (main, lower) if given."""
+    import matplotlib.pyplot as plt
+
+    if ax is not None:
+        main, low = ax
+        return main.figure, main, low
+    fig, (main, low) = plt.subplots(2, 1, figsize=figsize, sharex=True, height_ratios=list(height_ratios), layout="constrained")
+    return fig, main, low
+
+
 def save(fig, stem) -> list[Path]:
     """Write ``stem``.png (200 dpi) and ``stem``.pdf; return the paths."""
     stem = Path(stem)

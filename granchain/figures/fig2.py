@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import analysis
-from ._style import COLORS, MARKERS, VELOCITY_UNITS
+from ._style import COLORS, MARKERS, VELOCITY_UNITS, panel_pair
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,13 +88,7 @@ def plot(data: Fig2Data, ax=None):
 
     ``ax``: optional pair (main, lower) of axes.
     """
-    import matplotlib.pyplot as plt
-
-    if ax is None:
-        fig, (ax, low) = plt.subplots(2, 1, figsize=(7.4, 7.6), sharex=True, height_ratios=[2.3, 1], layout="constrained")
-    else:
-        ax, low = ax
-        fig = ax.figure
+    fig, ax, low = panel_pair(ax, figsize=(7.4, 7.6), height_ratios=(2.3, 1))
     lo, hi = data.fit_range
     main = data.main
     for c in data.chains:

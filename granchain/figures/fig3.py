@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import analysis, bca
-from ._style import COLORS, MARKERS, TIME_LABEL
+from ._style import COLORS, MARKERS, panel_pair
 
 
 def _bca_slope(ds) -> float:
@@ -93,13 +93,7 @@ def compute(ds, fit_range=(2, 25), sums=None) -> Fig3Data:
 
 def plot(data: Fig3Data, ax=None):
     """Arrival time vs k (top) and residuals about the fit (bottom); ``ax``: optional pair of axes."""
-    import matplotlib.pyplot as plt
-
-    if ax is None:
-        fig, (ax, low) = plt.subplots(2, 1, figsize=(7.0, 7.0), sharex=True, height_ratios=[1.4, 1], layout="constrained")
-    else:
-        ax, low = ax
-        fig = ax.figure
+    fig, ax, low = panel_pair(ax, figsize=(7.0, 7.0), height_ratios=(1.4, 1))
     lo, hi = data.fit_range
     inner = slice(0, -1)  # k = N, the free end, flies off: its "arrival" is a plateau, not a peak
     f = data.fit[data.main]
