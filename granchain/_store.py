@@ -473,24 +473,7 @@ class ZarrSink:
         return done
 
     def _check_chunk(self, group, spec, j: int, names) -> str | None:
-        try:
-            sums = group["progress/checksum"][j]
-        except Exception as exc:  # noqa: BLE001
-            return f"has an unreadable checksum record (progress/checksum/{j}.0: {_short(exc)})"
-        variables = {v.name: v for v in parameter_variables(spec.family) + RESULTS}
-        variables.update({f"progress/{v.name}": v for v in PROGRESS if v.name in PROGRESS_SUMS})
-        for k, name in enumerate(names):
-            v = variables[name]
-            axis, sl = ("chunk", slice(j, j + 1)) if name.startswith("progress/") else ("realization", spec.chunk_slice(j))
-            key = f"{name}/" + ".".join(str(j) if d == axis else "0" for d in v.dims)
-            try:
-                values = group[name][_region(v.dims, axis, sl)]
-            except Exception as exc:  # noqa: BLE001 -- truncated or garbled chunk
-                return f"has an unreadable data file {key} ({_short(exc)})"
-            if digest(values, v.dtype) != int(sums[k]):
-                missing = not os.path.exists(os.path.join(self.path, *key.split("/")))
-                return f"has {'a missing' if missing else 'a changed'} data file {key} (checksum mismatch)"
-        return None
+        return check_chunk(self.path, group, j, names, spec.chunk_slice(j))
 
     def _mark_undone(self, chunks):
         import zarr
@@ -591,6 +574,31 @@ class ZarrSink:
 
     def close(self):
         self.lock.release()
+
+
+def check_chunk(path, group, j: int, names, sl: slice) -> str | None:
+    """Why chunk j (realisations ``sl``) of the store does not match its checksums, or None if it does.
+    Reads only the store (dims and dtypes from its metadata), so ``granchain info`` can use it too."""
+    try:
+        sums = group["progress/checksum"][j]
+    except Exception as exc:  # noqa: BLE001
+        return f"has an unreadable checksum record (progress/checksum/{j}.0: {_short(exc)})"
+    for k, name in enumerate(names):
+        axis, region_slice = ("chunk", slice(j, j + 1)) if name.startswith("progress/") else ("realization", sl)
+        try:
+            arr = group[name]
+            dims = arr.metadata.attributes["_ARRAY_DIMENSIONS"]
+        except Exception as exc:  # noqa: BLE001
+            return f"has unreadable metadata for {name} ({_short(exc)})"
+        key = f"{name}/" + ".".join(str(j) if d == axis else "0" for d in dims)
+        try:
+            values = arr[_region(dims, axis, region_slice)]
+        except Exception as exc:  # noqa: BLE001 -- truncated or garbled chunk
+            return f"has an unreadable data file {key} ({_short(exc)})"
+        if digest(values, arr.dtype) != int(sums[k]):
+            missing = not os.path.exists(os.path.join(path, *key.split("/")))
+            return f"has {'a missing' if missing else 'a changed'} data file {key} (checksum mismatch)"
+    return None
 
 
 def _buf(raw: bytes):
