@@ -452,8 +452,7 @@ class ZarrSink:
 
         group = zarr.open_group(self.path, mode="r", zarr_format=2, use_consolidated=False)
         names = checked_variables(spec)
-        done = self._done_flags(group, spec)
-        bad = []
+        done, bad = self._done_flags(group, spec)
         for j in np.flatnonzero(done == 1):
             reason = self._check_chunk(group, spec, int(j), names)
             if reason:
@@ -462,15 +461,17 @@ class ZarrSink:
                 self._warn(f"{self.path}: chunk {j} (realisations {sl.start}-{sl.stop - 1}) {reason}; recomputing it")
         return bad
 
-    def _done_flags(self, group, spec) -> np.ndarray:
-        done = np.zeros(spec.n_chunks, dtype=np.int8)
+    def _done_flags(self, group, spec, warn: bool = True):
+        done, unreadable = np.zeros(spec.n_chunks, dtype=np.int8), []
         for j in range(spec.n_chunks):
             try:
                 done[j] = group["progress/done"][j]
             except Exception:  # noqa: BLE001 -- an unreadable flag counts as not done
-                self._warn(f"{self.path}: {os.path.join(self.path, 'progress', 'done', str(j))} is unreadable; chunk {j} "
-                           "will be recomputed")
-        return done
+                unreadable.append(j)
+                if warn:
+                    self._warn(f"{self.path}: the done flag {os.path.join(self.path, 'progress', 'done', str(j))} is "
+                               f"unreadable; chunk {j} will be recomputed")
+        return done, unreadable
 
     def _check_chunk(self, group, spec, j: int, names) -> str | None:
         return check_chunk(self.path, group, j, names, spec.chunk_slice(j))
@@ -521,9 +522,11 @@ class ZarrSink:
         return xr.open_zarr(self.path, group="progress", consolidated=False)
 
     def pending(self) -> list[int]:
-        with self._progress() as p:
-            done = p["done"].values
-        return [j for j in range(self.spec.n_chunks) if not done[j]]
+        import zarr
+
+        group = zarr.open_group(self.path, mode="r", zarr_format=2, use_consolidated=False)
+        done, _ = self._done_flags(group, self.spec, warn=False)
+        return [j for j in range(self.spec.n_chunks) if done[j] != 1]
 
     def write(self, res: dict) -> None:
         import xarray as xr
@@ -591,13 +594,15 @@ def check_chunk(path, group, j: int, names, sl: slice) -> str | None:
         except Exception as exc:  # noqa: BLE001
             return f"has unreadable metadata for {name} ({_short(exc)})"
         key = f"{name}/" + ".".join(str(j) if d == axis else "0" for d in dims)
+        if not os.path.exists(os.path.join(path, *key.split("/"))):  # every chunk is written explicitly
+            return f"has a missing data file {key}"
         try:
             values = arr[_region(dims, axis, region_slice)]
         except Exception as exc:  # noqa: BLE001 -- truncated or garbled chunk
             return f"has an unreadable data file {key} ({_short(exc)})"
         if digest(values, arr.dtype) != int(sums[k]):
-            missing = not os.path.exists(os.path.join(path, *key.split("/")))
-            return f"has {'a missing' if missing else 'a changed'} data file {key} (checksum mismatch)"
+            return (f"does not match its checksum: the data file {key} or the checksum record "
+                    f"progress/checksum/{j}.0 has changed")
     return None
 
 
