@@ -63,7 +63,11 @@ class StoreLock:
     def acquire(self) -> None:
         import fcntl
 
-        fd = os.open(self.file, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fd = os.open(self.file, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise ValueError(f"out = {self.store}: cannot write there ({exc.strerror} for {self.file}); "
+                             "choose a writable path") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
