@@ -64,7 +64,7 @@ def add_parser(subparsers) -> None:
                         "--no-resume refuses an existing store")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")
     p.add_argument("--threads", type=int, default=None, help="Numba threads for a local run (default: all cores)")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors and warnings about the store")
+    p.add_argument("--quiet", action="store_true", help="no progress output: only errors, warnings about the store and the final one-line result")
     p.set_defaults(func=run)
 
 
@@ -176,8 +176,6 @@ def run(args) -> int:
         if client is not None:
             client.close()
     failed = int((ds["status"] != 0).sum())
-    if args.quiet:
-        return 0
     print(f"wrote {args.out}: {family.label()}; {ds.sizes['realization']} realisations x {ds.sizes['chain']} chains "
           f"({', '.join(ds['chain'].values)}), {ds.sizes['granule']} observed granules, integrator "
           f"{integrator.name}; failed integrations: {failed}")
