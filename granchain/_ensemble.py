@@ -27,7 +27,7 @@ from ._validate import count
 from ._version import __version__
 from .families import ChainFamily, RandomDecorated
 
-__all__ = ["EnsembleSpec", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
+__all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
 
 #: Ensemble defaults. Per-realisation peaks stay within ~1e-6 (relative) of
 #: DOP853 at rtol 1e-10: far below the ensemble's statistical error (~1e-3
@@ -121,10 +121,12 @@ class EnsembleSpec:
 
 
 # --------------------------------------------------------------------------- compute
-def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None) -> dict:
+def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_progress=None) -> dict:
     """Results of chunk j: the family's random parameters, per-realisation results and fixed-point sums.
 
-    A top-level function so that Dask can ship it to workers.
+    A top-level function so that Dask can ship it to workers. ``on_progress(k)`` (local runs) is
+    called after every batch of k realisations; the batches are an implementation detail that does
+    not change any result (per-realisation results are independent, and the sums are integers).
     """
     import numba
 
@@ -132,13 +134,38 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None) -> dic
     if threads is not None:
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     try:
-        return _compute_chunk(spec, j)
+        if on_progress is None:
+            return _compute_chunk(spec, j)
+        sl = spec.chunk_slice(j)
+        step = max(16, 8 * numba.get_num_threads())
+        parts = []
+        for start in range(sl.start, sl.stop, step):
+            parts.append(_compute_chunk(spec, j, slice(start, min(start + step, sl.stop))))
+            on_progress(parts[-1]["realizations"])
+        return _merge(parts)
     finally:
         numba.set_num_threads(previous)
 
 
-def _compute_chunk(spec: EnsembleSpec, j: int) -> dict:
-    sl = spec.chunk_slice(j)
+def _merge(parts: list) -> dict:
+    """One chunk's result from the results of consecutive batches of its realisations."""
+    if len(parts) == 1:
+        return parts[0]
+    out = {"chunk": parts[0]["chunk"], "realizations": sum(p["realizations"] for p in parts)}
+    for key, first in parts[0].items():
+        if key in out:
+            continue
+        if key in ("sum_v", "sum_v2", "n_valid"):  # exact integer sums
+            out[key] = sum(p[key] for p in parts)
+        elif key in ("peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end"):  # (chain, realization, ...)
+            out[key] = np.concatenate([p[key] for p in parts], axis=1)
+        else:  # the family's parameters, (realization, ...)
+            out[key] = np.concatenate([p[key] for p in parts], axis=0)
+    return out
+
+
+def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
+    sl = spec.chunk_slice(j) if sl is None else sl
     idx = np.arange(sl.start, sl.stop)
     family = spec.family
     params = family.draw_batch(spec.seed, idx)
@@ -249,16 +276,22 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     out : path, optional
         Zarr store to write (and resume). Without it the results stay in memory.
     resume : bool
-        Continue an existing store written with the same parameters (a store
-        with other parameters is refused). False: an existing store is an error.
+        True (default, as in the CLI): continue an existing store written with the same parameters,
+        after verifying every finished chunk (damaged chunks are recomputed), and extend it if more
+        realisations are asked for than it holds; a store with other parameters is refused.
+        False: an existing store is an error.
     client : dask.distributed.Client, optional
         Run the chunks as tasks on this cluster (results are identical).
     progress : bool
-        Progress bar with realisations/s and ETA on stderr.
+        Progress on stderr: a bar with realisations/s and ETA on a terminal or in a notebook,
+        one line per chunk otherwise (e.g. redirected to a log file).
     exit_margin, peak_rtol, max_steps
         Run controls, as in :func:`granchain.simulate` (:class:`granchain.RunControls`).
     threads : int, optional
-        Numba threads for local runs (default: all cores).
+        Numba threads for local runs, 1 .. the cores Numba can use (default: all cores).
+
+    Ctrl-C raises :class:`EnsembleInterrupted` (a KeyboardInterrupt) whose message says where the
+    finished chunks are saved.
 
     Returns
     -------
@@ -270,35 +303,109 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     fam = _family_of(family, distribution, n, momentum_conserving)
     spec = EnsembleSpec(fam, realizations, seed, chains, _integrator_of(integrator, rtol, atol), t_grid, chunk_size,
                         RunControls(exit_margin, max_steps, peak_rtol))
-    sink = MemorySink(spec) if out is None else ZarrSink(spec, out, resume)
-    pending = sink.pending()
-    done_realizations = spec.realizations - sum(spec.chunk_slice(j).stop - spec.chunk_slice(j).start for j in pending)
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=spec.realizations, initial=done_realizations, unit=" realisations", disable=not progress, smoothing=0.05,
-               desc=f"{fam.kind} {'+'.join(spec.chains)}", dynamic_ncols=True)
+    threads = _threads(threads)
+    if not isinstance(resume, (bool, np.bool_)):
+        raise ValueError(f"resume must be True or False, got {resume!r}")
+    report = _Progress(spec, progress)
+    sink = MemorySink(spec) if out is None else ZarrSink(spec, out, bool(resume), log=report.message)
     futures = []
     try:
+        pending = sink.pending()
+        report.start(spec.realizations - sum(_size(spec.chunk_slice(j)) for j in pending), len(pending))
         if client is None:
             for j in pending:
-                res = compute_chunk(spec, j, threads=threads)
+                res = compute_chunk(spec, j, threads=threads, on_progress=report.update)
                 sink.write(res)
-                bar.update(res["realizations"])
+                report.chunk_done(j, res["realizations"], counted=True)
         else:
             from distributed import as_completed
 
             futures = [client.submit(_dask_chunk, spec, j, pure=False) for j in pending]
             for fut, res in as_completed(futures, with_results=True):
                 sink.write(res)
-                bar.update(res["realizations"])
+                report.chunk_done(res["chunk"], res["realizations"], counted=False)
                 fut.release()
+        report.close()
+        return sink.finalize()
     except KeyboardInterrupt:
         if futures:
             client.cancel(futures)
-        bar.close()
+        report.close()
+        where = (f"finished chunks are saved in {out}; call run_ensemble again with the same arguments to continue"
+                 if out is not None else "no out= store was given, so nothing was saved")
+        raise EnsembleInterrupted(f"interrupted: {where}") from None
+    finally:
         if out is not None:
-            print(f"\ninterrupted: finished chunks are saved in {out}; call again with the same arguments "
-                  "(resume=True) to continue", file=sys.stderr, flush=True)
-        raise
-    bar.close()
-    return sink.finalize()
+            sink.close()
+
+
+class EnsembleInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`run_ensemble` (the message says where the finished chunks are)."""
+
+
+def _size(sl: slice) -> int:
+    return sl.stop - sl.start
+
+
+def _threads(threads):
+    if threads is None:
+        return None
+    import numba
+
+    cores = numba.config.NUMBA_NUM_THREADS
+    k = count("threads", threads, minimum=1)
+    if k > cores:
+        raise ValueError(f"threads = {k} is more than the {cores} threads Numba can use here; "
+                         f"pass 1..{cores} (CLI: --threads), or leave it out for all cores")
+    return k
+
+
+class _Progress:
+    """Progress on stderr: a bar on a terminal or in a notebook, one line per chunk otherwise, nothing
+    when ``enabled`` is False. Local runs update it after every batch of a chunk's realisations."""
+
+    def __init__(self, spec, enabled: bool):
+        self.spec, self.enabled = spec, bool(enabled)
+        self.mode = "off"
+        if self.enabled:
+            interactive = "ipykernel" in sys.modules or bool(getattr(sys.stderr, "isatty", lambda: False)())
+            self.mode = "bar" if interactive else "lines"
+        self.bar = None
+
+    def message(self, text: str) -> None:
+        if self.enabled:
+            print(text, file=sys.stderr, flush=True)
+
+    def start(self, done: int, chunks: int) -> None:
+        import time
+
+        self.t0, self.done0, self.done, self.chunks = time.monotonic(), done, done, chunks
+        if self.mode == "bar":
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(total=self.spec.realizations, initial=done, unit=" realisations", smoothing=0.05,
+                            desc=f"{self.spec.family.kind} {'+'.join(self.spec.chains)}", dynamic_ncols=True,
+                            mininterval=0.5)
+        elif self.mode == "lines" and done:
+            self.message(f"resuming: {done} of {self.spec.realizations} realisations already done, {chunks} chunks to go")
+
+    def update(self, k: int) -> None:
+        self.done += k
+        if self.bar is not None:
+            self.bar.update(k)
+
+    def chunk_done(self, j: int, k: int, counted: bool) -> None:
+        import time
+
+        if not counted:
+            self.update(k)
+        if self.mode == "lines":
+            rate = (self.done - self.done0) / max(time.monotonic() - self.t0, 1e-9)
+            eta = (self.spec.realizations - self.done) / rate if rate > 0 else float("inf")
+            self.message(f"chunk {j + 1}/{self.spec.n_chunks} done: {self.done}/{self.spec.realizations} realisations, "
+                         f"{rate:.1f}/s, ETA {eta:.0f} s")
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None

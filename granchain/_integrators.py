@@ -28,7 +28,7 @@ from ._kernels._ensemble import accumulate_fixed_point, integrate_batch
 from ._reference import dop853_integrate
 from ._validate import count, finite_scalar
 
-__all__ = ["Integrator", "DP5", "Verlet", "DOP853", "INTEGRATORS", "RunControls", "get_integrator"]
+__all__ = ["Integrator", "DP5", "Verlet", "VerletStabilityWarning", "verlet_omega_max", "DOP853", "INTEGRATORS", "RunControls", "get_integrator"]
 
 
 def _tolerances(rtol, atol):
@@ -175,9 +175,42 @@ class DP5(_Compiled):
         return np.array([self.rtol, self.atol, self.first_step, self.fixed_step or 0.0])
 
 
+class VerletStabilityWarning(UserWarning):
+    """Verlet's time step is beyond its stability limit for the chain: results are meaningless."""
+
+
+def verlet_omega_max(masses, stiffness, n, initial_velocity) -> np.ndarray:
+    """Upper bound of the highest linearised angular frequency of chains (rows of ``masses``, ``stiffness``).
+
+    No contact can be compressed beyond the compression that holds all the energy E_0 = m_1 v_1^2 / 2
+    (Eq. motion_rescaled's potential (c/n) delta^n): delta_i <= (n E_0 / c_i)^(1/n), where the contact's
+    linear stiffness is k_i = c_i (n-1) delta_i^(n-2). Gershgorin's theorem on M^-1 K then bounds
+    omega^2 <= max_i 2 (k_{i-1} + k_i) / m_i. For n < 2 the stiffness diverges at zero compression and
+    there is no bound (returns NaN).
+    """
+    m = np.atleast_2d(np.asarray(masses, dtype=float))
+    c = np.atleast_2d(np.asarray(stiffness, dtype=float))
+    v0 = np.atleast_1d(np.asarray(initial_velocity, dtype=float)).reshape(-1, 1)
+    if n < 2.0:
+        return np.full(m.shape[0], np.nan)
+    e0 = 0.5 * m[:, :1] * v0 * v0
+    k = c * (n - 1.0) * (n * e0 / c) ** ((n - 2.0) / n)
+    zero = np.zeros((m.shape[0], 1))
+    both = np.concatenate([zero, k], axis=1) + np.concatenate([k, zero], axis=1)
+    return np.sqrt(np.max(2.0 * both / m, axis=1))
+
+
 @dataclass(frozen=True)
 class Verlet(_Compiled):
-    """Compiled fixed-step velocity Verlet (symplectic, order 2)."""
+    """Compiled fixed-step velocity Verlet (symplectic, order 2).
+
+    Stability: velocity Verlet is stable only for dt * omega_max <= 2, omega_max the chain's highest
+    linearised angular frequency. Before integrating, ``dt`` is checked against the safe upper bound
+    of :func:`verlet_omega_max` (every contact at most as compressed as if it held all the pulse's
+    energy; Gershgorin bound of M^-1 K); a :class:`VerletStabilityWarning` is issued when
+    dt * omega_max > 2 (the bound is conservative: near it, compare with a smaller dt or DP5).
+    Not checked for n < 2, where the contact stiffness has no bound.
+    """
 
     dt: float = 1e-3
 
@@ -190,6 +223,28 @@ class Verlet(_Compiled):
 
     def kernel_params(self) -> np.ndarray:
         return np.array([self.dt])
+
+    def _check_stability(self, masses, stiffness, n, initial_velocity):
+        import warnings
+
+        omega = verlet_omega_max(masses, stiffness, n, initial_velocity)
+        bad = self.dt * omega > 2.0
+        if np.any(bad):
+            worst = float(np.nanmax(omega))
+            warnings.warn(
+                f"Verlet dt = {self.dt:g} is beyond its stability limit for {int(bad.sum())} of {bad.size} chain(s): "
+                f"dt * omega_max = {self.dt * worst:.3g} > 2 (omega_max <= {worst:.4g}); the results are not trustworthy. "
+                f"Use dt <= {2.0 / worst:.3g} or the adaptive DP5", VerletStabilityWarning, stacklevel=4)
+
+    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
+        self._check_stability(chain.masses[None], chain.stiffness[None], chain.n, chain.initial_velocity)
+        return super().integrate(chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=stop_at_exit, controls=controls)
+
+    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, *, t_grid, t_max, controls: RunControls,
+                        scale: float, out: dict) -> None:
+        self._check_stability(masses, stiffness, n, initial_velocity)
+        super().integrate_batch(masses, stiffness, n, initial_velocity, observed, t_grid=t_grid, t_max=t_max,
+                                controls=controls, scale=scale, out=out)
 
 
 @dataclass(frozen=True)

@@ -148,6 +148,11 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     status, info, peak_v, peak_t, grid_v = integ.integrate(
         chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit"), controls=controls
     )
+    if status != Status.SUCCESS:
+        import warnings
+
+        warnings.warn(f"simulate: the integration did not succeed: {Status(status).name} ({Status(status).message}); "
+                      "check result.status before using the peaks", RuntimeWarning, stacklevel=2)
     e0, p0 = chain.energy, chain.momentum
     e1 = total_energy(x, v, chain.masses, chain.stiffness, chain.n)
     p1 = total_momentum(v, chain.masses)

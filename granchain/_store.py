@@ -17,6 +17,7 @@ granules, ``time``, and the family's parameter dims such as ``gap``):
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import os
 from dataclasses import dataclass, field
@@ -26,7 +27,8 @@ import numpy as np
 from ._status import NOT_COMPUTED, Status, describe_codes
 from ._version import __version__
 
-__all__ = ["Variable", "RESULTS", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "stored_record"]
+__all__ = ["Variable", "RESULTS", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "StoreRepairWarning", "stored_record",
+           "check_same_parameters", "checked_variables"]
 
 UNITS_V = "V_1 (velocity of the struck granule; rescaled, paper Sec. II)"
 UNITS_T = "rescaled time (paper Sec. II)"
@@ -55,7 +57,9 @@ RESULTS = (
     Variable("peak_time", ("chain", "realization", "granule"), "float64", np.nan, UNITS_T,
              "time of the maximum velocity of large granule k (arrival time)"),
     Variable("status", ("chain", "realization"), "int8", NOT_COMPUTED, "1",
-             "integration status (0 = success; -1 = not computed)", {"flag_meanings": " ".join(s.name for s in Status)}),
+             "integration status (0 = success; -1 = not computed)",
+             {"flag_values": [NOT_COMPUTED] + [int(s) for s in Status],
+              "flag_meanings": " ".join(["NOT_COMPUTED"] + [s.name for s in Status])}),
     Variable("energy_error", ("chain", "realization"), "float64", np.nan, "1", "relative energy drift (E_end - E_0)/E_0"),
     Variable("n_steps", ("chain", "realization"), "int64", -1, "1", "accepted integration steps"),
     Variable("t_end", ("chain", "realization"), "float64", np.nan, UNITS_T, "time the integration stopped"),
@@ -76,16 +80,13 @@ PROGRESS = (
     Variable("sum_v2", ("chunk", "chain", "granule", "time"), "int64", 0, "2^-fixed_point_bits V_1^2",
              "sum over the chunk's successful realisations of round(v^2 * 2^bits)"),
     Variable("n_valid", ("chunk", "chain"), "int64", 0, "1", "successful realisations of the chunk"),
-    Variable("done", ("chunk",), "int8", 0, "1", "1 once every result of the chunk is on disk"),
+    Variable("checksum", ("chunk", "checked"), "int64", 0, "1",
+             "BLAKE2b-64 of the chunk's stored values, per checked variable (written before done)"),
+    Variable("done", ("chunk",), "int8", 0, "1", "1 once every result of the chunk and its checksums are on disk"),
 )
 
-
-def _zarr_format() -> dict:
-    """Write Zarr format 2: a stable spec that every Zarr reader understands, with string coordinates
-    (format 3 has no settled string data type yet)."""
-    import zarr
-
-    return {"zarr_format": 2} if int(zarr.__version__.split(".")[0]) >= 3 else {}
+#: The progress variables that hold one run chunk's results (checked like the per-realisation results).
+PROGRESS_SUMS = ("sum_v", "sum_v2", "n_valid")
 
 
 def parameter_variables(family) -> tuple:
@@ -97,22 +98,44 @@ def parameter_variables(family) -> tuple:
 
 def _sizes(spec) -> dict:
     return {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
-            **spec.family.dim_sizes()}
+            "checked": len(checked_variables(spec)), **spec.family.dim_sizes()}
+
+
+def checked_variables(spec) -> list[str]:
+    """Every variable whose chunk values are checksummed: the family's parameters, :data:`RESULTS`
+    (read from the schema, so new results are checked automatically) and the progress sums."""
+    return [v.name for v in parameter_variables(spec.family) + RESULTS] + [f"progress/{name}" for name in PROGRESS_SUMS]
+
+
+def digest(values, dtype) -> int:
+    """BLAKE2b-64 (as a signed int64) of the values as stored (dtype, C order)."""
+    a = np.ascontiguousarray(values, dtype=np.dtype(dtype))
+    return int.from_bytes(hashlib.blake2b(a.tobytes(), digest_size=8).digest(), "little", signed=True)
 
 
 def _attrs(spec) -> dict:
     d = spec.describe()
     family = spec.family
     integ = spec.integrator.describe()
+    import numba
+    import scipy
+
+    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     attrs = {
+        "Conventions": "CF-1.8",
         "title": f"granchain ensemble: {family.label()}",
+        "history": f"{created} created by granchain {__version__} run_ensemble",
+        "institution": "granchain users",
+        "numpy_version": np.__version__,
+        "scipy_version": scipy.__version__,
+        "numba_version": numba.__version__,
         "source": f"granchain {__version__} run_ensemble (exact dynamics of paper Eq. motion_rescaled)",
         "references": "U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg, Pulse propagation in decorated random chains",
         "granchain_parameters": json.dumps(d, sort_keys=True),
         "granchain_family": json.dumps(d["family"], sort_keys=True),
         "granchain_integrator": json.dumps(integ, sort_keys=True),
         "granchain_version": __version__,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created": created,
         "family": family.kind,
         "realizations": spec.realizations,
         "seed": spec.seed,
@@ -182,7 +205,9 @@ def progress_dataset(spec):
         shape = tuple(sizes[d] for d in v.dims)
         data[v.name] = (v.dims, np.full(shape, v.fill, dtype=v.dtype), v.metadata())
         encoding[v.name] = {"chunks": (1,) + shape[1:]}
-    ds = xr.Dataset(data, attrs={"granchain_parameters": json.dumps(spec.describe(), sort_keys=True),
+    coords = {"checked": ("checked", np.array(checked_variables(spec), dtype=object).astype(str),
+                          {"long_name": "variable whose chunk values the checksum covers"})}
+    ds = xr.Dataset(data, coords=coords, attrs={"granchain_parameters": json.dumps(spec.describe(), sort_keys=True),
                                  "about": "bookkeeping of granchain.run_ensemble: fixed-point velocity sums per chunk and done flags"})
     return ds, encoding
 
@@ -236,71 +261,411 @@ class MemorySink:
         return finalize(self.ds, self.spec, self.sum_v.sum(0), self.sum_v2.sum(0), self.n_valid.sum(0))
 
 
+class StoreRepairWarning(UserWarning):
+    """A damaged part of a store was found and is being repaired (the message names it)."""
+
+
+def _fmt2() -> dict:
+    return {"zarr_format": 2}
+
+
+def _read_json(path):
+    """The JSON document in ``path``, or None if it is missing or unreadable."""
+    try:
+        with open(path, "rb") as f:
+            return json.loads(f.read())
+    except (OSError, ValueError):
+        return None
+
+
+def stored_parameters(path) -> str | None:
+    """The parameter record of a store (progress group first, then the root attributes)."""
+    for attrs in (os.path.join(path, "progress", ".zattrs"), os.path.join(path, ".zattrs")):
+        doc = _read_json(attrs)
+        if isinstance(doc, dict) and isinstance(doc.get("granchain_parameters"), str):
+            return doc["granchain_parameters"]
+    return None
+
+
+def _region(dims, axis_dim, sl):
+    return tuple(sl if d == axis_dim else slice(None) for d in dims)
+
+
+def _reference_metadata(spec) -> tuple[dict, set]:
+    """Every metadata document (and coordinate chunk) of a fresh store for ``spec``, built in memory:
+    {key: bytes}, and the names of the coordinate arrays (their chunks are data to restore)."""
+    import zarr
+
+    mapping: dict = {}
+    store = zarr.storage.MemoryStore(mapping)
+    ds = empty_dataset(spec, lazy=True)
+    ds.to_zarr(store, mode="w-", compute=False, consolidated=False, **_fmt2())
+    progress, encoding = progress_dataset(spec)
+    progress.to_zarr(store, group="progress", mode="a", encoding=encoding, consolidated=False, **_fmt2())
+    coords = set(ds.coords) | {f"progress/{c}" for c in progress.coords}
+    return {k: (v.to_bytes() if hasattr(v, "to_bytes") else bytes(v)) for k, v in mapping.items()}, coords
+
+
+_VOLATILE_ATTRS = ("created", "history")  # kept from the store when root attributes are restored
+
+
 class ZarrSink:
-    """Results in a Zarr store at ``path``; finished chunks survive any interruption."""
+    """Results in a Zarr store at ``path``; finished chunks survive any interruption.
 
-    def __init__(self, spec, path, resume: bool):
-        import xarray as xr
+    * creation is atomic: the store is built under a temporary name and renamed into place;
+    * one writer: ``path + ".lock"`` (:class:`StoreLock`) is held for the whole run;
+    * each chunk's values are checksummed (progress/checksum) before its ``done`` flag; on resume
+      damaged metadata is restored from the parameters, every done chunk is verified, and a chunk
+      whose data are missing, unreadable or changed is recomputed (a warning names it and why);
+    * a store asked for more realisations than it holds is extended (realisation i depends only
+      on (seed, i), so the result equals a fresh run of the larger size bitwise).
+    """
 
-        self.spec, self.path = spec, os.fspath(path)
-        if os.path.exists(self.path):
-            if not resume:
-                raise ValueError(f"{self.path} already exists: pass resume=True (CLI: --resume) to continue it, or choose another path")
+    def __init__(self, spec, path, resume: bool = True, log=None):
+        from ._lock import StoreLock
+
+        self.spec, self.path = spec, _check_out(path)
+        self.log = log or (lambda message: None)
+        self.lock = StoreLock(self.path)
+        self.lock.acquire()
+        try:
+            if not os.path.lexists(self.path):
+                self._create()
+            else:
+                if not resume:
+                    raise ValueError(f"{self.path} already exists: pass resume=True (CLI: --resume) to continue it, "
+                                     "or choose another path")
+                self._open_existing()
+        except BaseException:
+            self.lock.release()
+            raise
+
+    # ------------------------------------------------------------------ creation
+    def _create(self):
+        import zarr
+
+        parent, name = os.path.split(os.path.abspath(self.path))
+        for stale in os.listdir(parent):  # left by a run killed while creating (we hold the lock)
+            if stale.startswith(f".{name}.creating-"):
+                import shutil
+
+                shutil.rmtree(os.path.join(parent, stale), ignore_errors=True)
+        tmp = os.path.join(parent, f".{name}.creating-{os.getpid()}")
+        empty_dataset(self.spec, lazy=True).to_zarr(tmp, mode="w-", compute=False, consolidated=False, **_fmt2())
+        progress, encoding = progress_dataset(self.spec)
+        progress.to_zarr(tmp, group="progress", mode="a", encoding=encoding, consolidated=False, **_fmt2())
+        self._write_fill(tmp, slice(0, self.spec.realizations))
+        zarr.consolidate_metadata(tmp, zarr_format=2)
+        os.rename(tmp, self.path)  # atomic: the store is absent or complete
+
+    def _write_fill(self, path, sl):
+        """Write the not-computed value of every per-realisation variable in ``sl`` explicitly, so that
+        every reader (xarray, zarr) sees status = -1, n_steps = -1 and NaN there."""
+        import zarr
+
+        group = zarr.open_group(path, mode="r+", zarr_format=2, use_consolidated=False)
+        for v in parameter_variables(self.spec.family) + RESULTS:
+            arr = zarr.open_array(store=path, path=v.name, mode="r+", zarr_format=2, config={"write_empty_chunks": True})
+            region = _region(v.dims, "realization", sl)
+            shape = tuple(s.stop - s.start if isinstance(s, slice) and s.stop is not None else n
+                          for s, n in zip(region, group[v.name].shape))
+            arr[region] = np.full(shape, v.fill, dtype=v.dtype)
+
+    # ------------------------------------------------------------------ resume
+    def _open_existing(self):
+        import dataclasses
+
+        path = self.path
+        if not os.path.isdir(path):
+            raise ValueError(f"{path} exists and is not a directory (a Zarr store is a directory): choose another path")
+        stored = stored_parameters(path)
+        if stored is None:
+            if os.path.exists(os.path.join(path, ".zgroup")) or os.path.exists(os.path.join(path, "progress")):
+                raise ValueError(
+                    f"{path} has lost its parameter record (both {os.path.join(path, '.zattrs')} and "
+                    f"{os.path.join(path, 'progress', '.zattrs')} are missing or unreadable), so its results cannot be "
+                    f"trusted: delete it (rm -r {path}) and run again")
+            raise ValueError(f"{path} exists but is not a granchain ensemble store; choose another path")
+        old_realizations = check_same_parameters(path, stored, self.spec, extend=True)
+        old = dataclasses.replace(self.spec, realizations=old_realizations)
+        if old.fixed_point_bits != self.spec.fixed_point_bits:
+            raise ValueError(
+                f"{path} holds {old_realizations} realisations summed with {old.fixed_point_bits} fixed-point bits; "
+                f"{self.spec.realizations} realisations need {self.spec.fixed_point_bits} bits (more than 2^20 realisations), "
+                "so they cannot extend it bitwise: start a new store for this run")
+        self._repair_metadata(old, warn=True)
+        bad = self._verify(old)
+        if bad:
+            self._mark_undone(bad)
+        if old_realizations < self.spec.realizations:
+            self._extend(old)
+        import zarr
+
+        zarr.consolidate_metadata(path, zarr_format=2)
+
+    def _repair_metadata(self, spec, warn: bool):
+        """Restore every metadata document (and coordinate) that differs from a fresh store's for ``spec``."""
+        import zarr
+
+        reference, coords = _reference_metadata(spec)
+        stored_root = _read_json(os.path.join(self.path, ".zattrs")) or {}
+        stored_progress = _read_json(os.path.join(self.path, "progress", ".zattrs")) or {}
+        for key, raw in sorted(reference.items()):
+            if not key.endswith((".zgroup", ".zattrs", ".zarray")):
+                continue
+            want = json.loads(raw)
+            keep = stored_root if key == ".zattrs" else stored_progress if key == "progress/.zattrs" else {}
+            for k in _VOLATILE_ATTRS:
+                if k in keep and k in want:
+                    want[k] = keep[k]
+            if key in (".zattrs", "progress/.zattrs") and not warn and "history" in want:
+                want["history"] = (keep.get("history", want["history"]) + "\n" +
+                                   f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} extended to "
+                                   f"{spec.realizations} realisations by granchain {__version__}")
+            file = os.path.join(self.path, *key.split("/"))
+            have = _read_json(file)
+            if have == want:
+                continue
+            if warn:
+                what = "missing" if not os.path.exists(file) else "unreadable" if have is None else "changed"
+                self._warn(f"{file} was {what}; restored it from the stored parameters")
+            os.makedirs(os.path.dirname(file), exist_ok=True)
+            _atomic_write(file, json.dumps(want, indent=4, sort_keys=True).encode())
+        ref_group = zarr.open_group(zarr.storage.MemoryStore({k: _buf(v) for k, v in reference.items()}), mode="r",
+                                    zarr_format=2, use_consolidated=False)
+        disk = zarr.open_group(self.path, mode="r+", zarr_format=2, use_consolidated=False)
+        for name in sorted(coords):
+            want = ref_group[name][...]
             try:
-                stored = xr.open_zarr(self.path, group="progress").attrs.get("granchain_parameters")
-            except Exception as exc:  # not a Zarr store, or not ours
-                raise ValueError(f"{self.path} exists but is not a granchain ensemble store ({exc}); choose another path") from None
-            check_same_parameters(self.path, stored, spec)
-        else:
-            empty_dataset(spec, lazy=True).to_zarr(self.path, mode="w-", compute=False, **_zarr_format())
-            progress, encoding = progress_dataset(spec)
-            progress.to_zarr(self.path, group="progress", mode="a", encoding=encoding, **_zarr_format())
+                same = np.array_equal(disk[name][...], want)
+            except Exception:  # noqa: BLE001 -- unreadable coordinate chunks are restored
+                same = False
+            if not same:
+                if warn:
+                    self._warn(f"coordinate {os.path.join(self.path, name)} was missing or damaged; restored it")
+                disk[name][...] = want
 
+    def _verify(self, spec) -> list[int]:
+        """Done chunks whose stored values do not match their checksums (with the reason reported)."""
+        import zarr
+
+        group = zarr.open_group(self.path, mode="r", zarr_format=2, use_consolidated=False)
+        names = checked_variables(spec)
+        done, bad = self._done_flags(group, spec)
+        for j in np.flatnonzero(done == 1):
+            reason = self._check_chunk(group, spec, int(j), names)
+            if reason:
+                bad.append(int(j))
+                sl = spec.chunk_slice(int(j))
+                self._warn(f"{self.path}: chunk {j} (realisations {sl.start}-{sl.stop - 1}) {reason}; recomputing it")
+        return bad
+
+    def _done_flags(self, group, spec, warn: bool = True):
+        done, unreadable = np.zeros(spec.n_chunks, dtype=np.int8), []
+        for j in range(spec.n_chunks):
+            try:
+                done[j] = group["progress/done"][j]
+            except Exception:  # noqa: BLE001 -- an unreadable flag counts as not done
+                unreadable.append(j)
+                if warn:
+                    self._warn(f"{self.path}: the done flag {os.path.join(self.path, 'progress', 'done', str(j))} is "
+                               f"unreadable; chunk {j} will be recomputed")
+        return done, unreadable
+
+    def _check_chunk(self, group, spec, j: int, names) -> str | None:
+        return check_chunk(self.path, group, j, names, spec.chunk_slice(j))
+
+    def _mark_undone(self, chunks):
+        import zarr
+
+        done = zarr.open_array(store=self.path, path="progress/done", mode="r+", zarr_format=2,
+                               config={"write_empty_chunks": True})
+        for j in chunks:
+            done[j] = 0
+
+    def _extend(self, old):
+        """Grow the store from ``old.realizations`` to ``self.spec.realizations`` (same seed, same chunks)."""
+        import zarr
+
+        spec = self.spec
+        self.log(f"extending {self.path} from {old.realizations} to {spec.realizations} realisations")
+        last = old.n_chunks - 1
+        start = old.realizations
+        if old.chunk_slice(last) != spec.chunk_slice(last):  # the old last chunk was short: redo it whole
+            self._mark_undone([last])
+            start = old.chunk_slice(last).start
+        group = zarr.open_group(self.path, mode="r+", zarr_format=2, use_consolidated=False)
+        for v in parameter_variables(spec.family) + RESULTS:
+            arr = group[v.name]
+            arr.resize(tuple(spec.realizations if d == "realization" else n for d, n in zip(v.dims, arr.shape)))
+        group["realization"].resize((spec.realizations,))
+        group["realization"][old.realizations:] = np.arange(old.realizations, spec.realizations)
+        for v in PROGRESS:
+            arr = zarr.open_array(store=self.path, path=f"progress/{v.name}", mode="r+", zarr_format=2,
+                                  config={"write_empty_chunks": True})
+            shape = (spec.n_chunks,) + arr.shape[1:]
+            arr.resize(shape)
+            arr[old.n_chunks:] = np.full((spec.n_chunks - old.n_chunks,) + shape[1:], v.fill, dtype=v.dtype)
+        self._write_fill(self.path, slice(start, spec.realizations))
+        self._repair_metadata(spec, warn=False)  # the parameter record last: a crash before it repeats the extension
+
+    def _warn(self, message: str):
+        import warnings
+
+        warnings.warn(message, StoreRepairWarning, stacklevel=4)
+
+    # ------------------------------------------------------------------ the run
     def _progress(self):
         import xarray as xr
 
         return xr.open_zarr(self.path, group="progress", consolidated=False)
 
     def pending(self) -> list[int]:
-        done = self._progress()["done"].values
-        return [j for j in range(self.spec.n_chunks) if not done[j]]
+        import zarr
+
+        group = zarr.open_group(self.path, mode="r", zarr_format=2, use_consolidated=False)
+        done, _ = self._done_flags(group, self.spec, warn=False)
+        return [j for j in range(self.spec.n_chunks) if done[j] != 1]
 
     def write(self, res: dict) -> None:
         import xarray as xr
 
-        j = res["chunk"]
-        chunk_dataset(self.spec, res).to_zarr(self.path, region={"realization": self.spec.chunk_slice(j)}, mode="r+", **_zarr_format())
+        spec, j = self.spec, res["chunk"]
+        data = chunk_dataset(spec, res)
+        data.to_zarr(self.path, region={"realization": spec.chunk_slice(j)}, mode="r+", consolidated=False,
+                     write_empty_chunks=True, **_fmt2())
+        sums = {
+            "sum_v": res["sum_v"][None],
+            "sum_v2": res["sum_v2"][None],
+            "n_valid": res["n_valid"].T,
+        }
+        dtypes = {v.name: v.dtype for v in PROGRESS}
+        values = {name: data[name].values for name in data.data_vars}
+        values.update({f"progress/{k}": np.asarray(a, dtype=dtypes[k]) for k, a in sums.items()})
+        check = np.array([[digest(values[name], values[name].dtype) for name in checked_variables(spec)]], dtype=np.int64)
         region = {"chunk": slice(j, j + 1)}
-        sums = xr.Dataset({
-            "sum_v": (("chunk", "chain", "granule", "time"), res["sum_v"][None]),
-            "sum_v2": (("chunk", "chain", "granule", "time"), res["sum_v2"][None]),
-            "n_valid": (("chunk", "chain"), res["n_valid"].T),
-        })
-        sums.to_zarr(self.path, group="progress", region=region, mode="r+", consolidated=False, **_zarr_format())
-        # The flag last: a chunk counts as done only once all its data are on disk.
+        xr.Dataset({
+            "sum_v": (("chunk", "chain", "granule", "time"), values["progress/sum_v"]),
+            "sum_v2": (("chunk", "chain", "granule", "time"), values["progress/sum_v2"]),
+            "n_valid": (("chunk", "chain"), values["progress/n_valid"]),
+            "checksum": (("chunk", "checked"), check),
+        }).to_zarr(self.path, group="progress", region=region, mode="r+", consolidated=False, write_empty_chunks=True,
+                   **_fmt2())
+        # The flag last: a chunk counts as done only once all its data and checksums are on disk.
         xr.Dataset({"done": (("chunk",), np.ones(1, dtype=np.int8))}).to_zarr(
-            self.path, group="progress", region=region, mode="r+", consolidated=False, **_zarr_format())
+            self.path, group="progress", region=region, mode="r+", consolidated=False, write_empty_chunks=True, **_fmt2())
 
     def finalize(self):
         import xarray as xr
+        import zarr
 
-        prog = self._progress().load()
-        ds = xr.open_zarr(self.path).load()
-        ds = finalize(ds, self.spec, prog["sum_v"].values.sum(0), prog["sum_v2"].values.sum(0), prog["n_valid"].values.sum(0))
-        ds[[v.name for v in AVERAGED]].to_zarr(
-            self.path, region={"chain": slice(None), "granule": slice(None), "time": slice(None)}, mode="r+", **_zarr_format())
-        return ds
+        try:
+            with self._progress() as p:
+                prog = p.load()
+            with xr.open_zarr(self.path, consolidated=False) as d:
+                ds = d.load()
+            ds = finalize(ds, self.spec, prog["sum_v"].values.sum(0), prog["sum_v2"].values.sum(0),
+                          prog["n_valid"].values.sum(0))
+            ds[[v.name for v in AVERAGED]].to_zarr(
+                self.path, region={"chain": slice(None), "granule": slice(None), "time": slice(None)}, mode="r+",
+                consolidated=False, **_fmt2())
+            zarr.consolidate_metadata(self.path, zarr_format=2)
+            return ds
+        finally:
+            self.close()
+
+    def close(self):
+        self.lock.release()
 
 
-def check_same_parameters(path, stored: str | None, spec) -> None:
-    """Refuse to resume a store written with other parameters, listing the differences."""
+def check_chunk(path, group, j: int, names, sl: slice) -> str | None:
+    """Why chunk j (realisations ``sl``) of the store does not match its checksums, or None if it does.
+    Reads only the store (dims and dtypes from its metadata), so ``granchain info`` can use it too."""
+    try:
+        sums = group["progress/checksum"][j]
+    except Exception as exc:  # noqa: BLE001
+        return f"has an unreadable checksum record (progress/checksum/{j}.0: {_short(exc)})"
+    for k, name in enumerate(names):
+        axis, region_slice = ("chunk", slice(j, j + 1)) if name.startswith("progress/") else ("realization", sl)
+        try:
+            arr = group[name]
+            dims = arr.metadata.attributes["_ARRAY_DIMENSIONS"]
+        except Exception as exc:  # noqa: BLE001
+            return f"has unreadable metadata for {name} ({_short(exc)})"
+        key = f"{name}/" + ".".join(str(j) if d == axis else "0" for d in dims)
+        if not os.path.exists(os.path.join(path, *key.split("/"))):  # every chunk is written explicitly
+            return f"has a missing data file {key}"
+        try:
+            values = arr[_region(dims, axis, region_slice)]
+        except Exception as exc:  # noqa: BLE001 -- truncated or garbled chunk
+            return f"has an unreadable data file {key} ({_short(exc)})"
+        if digest(values, arr.dtype) != int(sums[k]):
+            return (f"does not match its checksum: the data file {key} or the checksum record "
+                    f"progress/checksum/{j}.0 has changed")
+    return None
+
+
+def _buf(raw: bytes):
+    from zarr.core.buffer import default_buffer_prototype
+
+    return default_buffer_prototype().buffer.from_bytes(raw)
+
+
+def _short(exc) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"[:160]
+
+
+def _atomic_write(file: str, data: bytes) -> None:
+    tmp = f"{file}.tmp-{os.getpid()}"
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, file)
+
+
+def _check_out(path) -> str:
+    """The store path as a string, refusing what can never be a store (with what to change)."""
+    try:
+        text = os.fspath(path)
+    except TypeError:
+        raise ValueError(f"out must be a path (str or pathlib.Path), got {path!r}") from None
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    if not text.strip():
+        raise ValueError("out must be a non-empty path such as runs/N26.zarr (CLI: --out), got an empty string")
+    parent = os.path.dirname(os.path.abspath(text)) or "."
+    if os.path.lexists(text) and not os.path.isdir(text):
+        raise ValueError(f"out = {text} is an existing file, not a Zarr store (a directory): choose another path")
+    try:
+        os.makedirs(parent, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"out = {text}: cannot create its folder {parent} ({exc.strerror}); choose a writable path") from None
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"out = {text}: its folder {parent} is not writable; choose a writable path")
+    return text
+
+
+def check_same_parameters(path, stored: str | None, spec, extend: bool = False) -> int:
+    """Refuse to resume a store written with other parameters, listing the differences; returns the
+    stored number of realisations (with ``extend``, a store may hold fewer than asked: it is extended)."""
     if stored is None:
         raise ValueError(f"{path} is not a granchain ensemble store (no granchain_parameters); choose another path")
-    old, new = json.loads(stored), json.loads(json.dumps(spec.describe(), sort_keys=True))
+    try:
+        old = json.loads(stored)
+    except ValueError:
+        raise ValueError(f"{path}: its parameter record is not valid JSON; delete the store (rm -r {path}) and run again") from None
+    new = json.loads(json.dumps(spec.describe(), sort_keys=True))
+    stored_r = old.get("realizations")
+    if extend and isinstance(stored_r, int) and stored_r <= new["realizations"]:
+        old = {**old, "realizations": new["realizations"]}
     if old != new:
         diff = ", ".join(f"{k}: stored {old.get(k)!r}, asked {new.get(k)!r}" for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k))
-        raise ValueError(f"{path} was written with different parameters ({diff}); "
+        hint = " (a store can be extended to more realisations, never shrunk)" if old.get("realizations") != new["realizations"] else ""
+        raise ValueError(f"{path} was written with different parameters ({diff}){hint}; "
                          "results are never mixed: use another path, or the stored parameters to resume")
+    return int(stored_r)
 
 
 def stored_record(ds, key: str = "family") -> dict | None:

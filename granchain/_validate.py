@@ -72,7 +72,11 @@ def positive_array(name: str, values, *, min_size: int = 1) -> np.ndarray:
 
 def count(name: str, value, *, minimum: int) -> int:
     """An integer >= ``minimum``."""
-    if isinstance(value, bool) or not float(value).is_integer():
+    try:
+        whole = not isinstance(value, (bool, str, bytes)) and float(value).is_integer()
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole:
         raise ValueError(f"{name} must be a whole number, got {value!r}")
     k = int(value)
     if k < minimum:

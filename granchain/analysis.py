@@ -202,6 +202,8 @@ def fit_stretched_exp(x, v, sigma=None, *, fit_range=None, absolute_sigma=True, 
     Starting values come from a linear fit of log v on x^c over a grid of c.
     Raises ValueError for fewer than 4 points in range or v <= 0 there.
     """
+    if np.size(x) < 4 or np.size(v) < 4:
+        raise ValueError(f"fit_stretched_exp needs x and v with at least 4 points each, got {np.size(x)} and {np.size(v)}")
     x, v, s, rng, used = _xy(x, v, sigma, fit_range, "v", 4)
     if np.any(v <= 0):
         raise ValueError("v must be > 0 inside the fit range for a stretched exponential")
@@ -578,6 +580,9 @@ def pulse_peak(time, mean, stderr=None):
 
 def averaged_pulse_peak(ds, chain="decorated") -> PulsePeak:
     """max_t <v_k(t)> and argmax_t, per granule, with quadratic refinement (paper Fig. 2)."""
+    if not hasattr(ds, "data_vars") or "mean_velocity" not in ds:
+        raise ValueError(f"ds must be an ensemble Dataset with mean_velocity (from run_ensemble or "
+                         f"xarray.open_dataset(store, engine='zarr')), got {type(ds).__name__}")
     sub = _chain(ds, chain, ("mean_velocity", "mean_velocity_stderr"))
     v = sub["mean_velocity"].transpose("granule", "time").values.astype(float)
     e = sub["mean_velocity_stderr"].transpose("granule", "time").values.astype(float)

@@ -121,7 +121,8 @@ def A(n=HERTZ) -> float:
     A(5/2) = 2.43884.
     """
     n = _bca_n(n)
-    return _quarter_period(n) * (2.0 ** (n - 2.0) * n) ** (1.0 / n)  # Eq. (an)
+    # Eq. (an); (2^(n-2) n)^(1/n) in logarithms, finite for any n (2^(n-2) alone overflows near n = 1026)
+    return _quarter_period(n) * math.exp(((n - 2.0) * math.log(2.0) + math.log(n)) / n)
 
 
 def A_plain(n=HERTZ) -> float:

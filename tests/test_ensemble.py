@@ -294,7 +294,8 @@ def test_resume_with_other_parameters_is_refused(uninterrupted, capsys):
 def test_existing_store_without_resume_is_refused(uninterrupted, tmp_path, capsys):
     from granchain.cli import main
 
-    assert main(["ensemble", *CLI, "--out", str(uninterrupted)]) == 2
+    # resuming is the default of the CLI and the API (issue 10); --no-resume refuses an existing store
+    assert main(["ensemble", *CLI, "--out", str(uninterrupted), "--no-resume"]) == 2
     captured = capsys.readouterr()
     assert "already exists" in captured.err and "--resume" in captured.err and captured.out == ""
     # not a granchain store at all

@@ -12,7 +12,7 @@ import importlib
 import sys
 import warnings
 
-SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce")
+SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "info", "export")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,6 +51,17 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f"granchain {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"granchain {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 -- no raw tracebacks for users; GRANCHAIN_DEBUG=1 shows them
+        import os
+
+        if os.environ.get("GRANCHAIN_DEBUG"):
+            raise
+        print(f"granchain {args.command}: error: {type(exc).__name__}: {exc}\n"
+              "(unexpected: please report it with the command line; GRANCHAIN_DEBUG=1 shows the details)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -58,11 +58,45 @@ def add_parser(subparsers) -> None:
     p.add_argument("--t-end", type=float, default=None, help="end of the time grid of the averaged pulse (default: past the pulse's exit)")
     p.add_argument("--dt", type=float, default=0.1, help="spacing of the time grid of the averaged pulse (default 0.1)")
     p.add_argument("--out", required=True, help="Zarr store to write, e.g. runs/N26.zarr")
-    p.add_argument("--resume", action="store_true", help="continue an existing store written with the same arguments")
+    p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
+                   help="continue an existing store written with the same arguments (the default, as in the API: "
+                        "finished chunks are verified, damaged ones recomputed, a larger --realizations extends it); "
+                        "--no-resume refuses an existing store")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")
     p.add_argument("--threads", type=int, default=None, help="Numba threads for a local run (default: all cores)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress output: only errors, warnings about the store and the final one-line result")
     p.set_defaults(func=run)
+
+
+def check_arguments(args) -> None:
+    """Refuse numbers that can never work, naming the option (before anything is computed)."""
+    import math
+
+    for flag, value, lo in (("--dt", args.dt, 0.0), ("--t-end", args.t_end, 0.0), ("--step", args.step, 0.0),
+                            ("--rtol", args.rtol, 0.0), ("--atol", args.atol, 0.0)):
+        if value is not None and not (math.isfinite(value) and value > lo):
+            raise ValueError(f"{flag} must be a finite number > {lo:g}, got {value}")
+    for flag, value, lo in (("--realizations", args.realizations, 1), ("--chunk-size", args.chunk_size, 1),
+                            ("--seed", args.seed, 0), ("--threads", args.threads, 1), ("--large", args.large, 1),
+                            ("--size", args.size, 1)):
+        if value is not None and value < lo:
+            raise ValueError(f"{flag} must be >= {lo}, got {value}")
+    if not args.out.strip():
+        raise ValueError("--out must be a path such as runs/N26.zarr, got an empty string")
+
+
+def connect(address):
+    """A Dask client for ``--scheduler`` (None without it), or a clear error if it cannot be reached."""
+    if not address:
+        return None
+    from distributed import Client
+
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+        raise ValueError(f"--scheduler {address}: cannot connect ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
+                         "check the address (e.g. tcp://10.0.0.5:8786) and that the scheduler runs, "
+                         "or leave --scheduler out to run locally") from None
 
 
 def _pair(text: str) -> tuple:
@@ -116,6 +150,7 @@ def run(args) -> int:
 
     from .._ensemble import run_ensemble
 
+    check_arguments(args)
     family = build_family(args)
     grid = family.default_time_grid(args.dt)
     if args.t_end is not None:
@@ -126,11 +161,7 @@ def run(args) -> int:
     chains = tuple(c.strip() for c in args.chain.split(","))
     if chains == ("both",) or len(family.chains) == 1 and args.chain == "both":
         chains = "both"
-    client = None
-    if args.scheduler:
-        from distributed import Client
-
-        client = Client(args.scheduler)
+    client = connect(args.scheduler)
     try:
         ds = run_ensemble(
             family, realizations=args.realizations, seed=args.seed, chains=chains, integrator=integrator, t_grid=grid,
@@ -139,7 +170,7 @@ def run(args) -> int:
         )
     except KeyboardInterrupt:
         print(f"granchain ensemble: interrupted; finished chunks are saved in {args.out}. "
-              "Run the same command with --resume to continue.", file=sys.stderr)
+              "Run the same command again (--resume is the default) to continue.", file=sys.stderr)
         return 130
     finally:
         if client is not None:

@@ -10,11 +10,14 @@ import numpy as np
 from ._units import add_unit_arguments, scale_from_args
 
 
-def _floats(text: str) -> list[float]:
+def _floats(text: str, flag: str = "--radii") -> list[float]:
+    fields = text.split(",")
+    if any(not f.strip() for f in fields):
+        raise ValueError(f"{flag} has an empty field in {text!r}: give comma-separated numbers such as 0.1,0.2")
     try:
-        return [float(s) for s in text.split(",") if s.strip()]
+        return [float(s) for s in fields]
     except ValueError:
-        raise ValueError(f"expected comma-separated numbers, got {text!r}") from None
+        raise ValueError(f"{flag} expects comma-separated numbers, got {text!r}") from None
 
 
 def add_parser(subparsers) -> None:
@@ -67,15 +70,17 @@ def _physical_table(phys, labels) -> str:
 def run(args) -> int:
     import granchain as gc
 
+    if args.momentum_conserving and not args.effective:
+        raise ValueError("--momentum-conserving applies only to the effective chain: add --effective (with --small-radii)")
     units = scale_from_args(args)  # None without unit options; checked before integrating
     if args.small_radii is not None:
-        chain = gc.decorated(_floats(args.small_radii), n=args.n)
+        chain = gc.decorated(_floats(args.small_radii, "--small-radii"), n=args.n)
         if args.effective:
             chain = gc.effective(chain, momentum_conserving=args.momentum_conserving)
     else:
         if args.effective:
             raise ValueError("--effective needs --small-radii (a decorated chain)")
-        chain = gc.from_radii(_floats(args.radii), n=args.n)
+        chain = gc.from_radii(_floats(args.radii, "--radii"), n=args.n)
     result = gc.simulate(chain, _integrator(args))
     # Decorated (and effective) chains are reported by large-granule index k = 1..N
     # (decorated chain index 2k - 1); a chain from --radii by its own index.

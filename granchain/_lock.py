@@ -1,0 +1,134 @@
+"""One writer per store: an advisory lock file ``STORE.lock`` next to the store.
+
+The lock is an ``fcntl.flock`` on that file (released by the kernel when its holder exits, even
+after ``kill -9``), and the file records the holder's PID, host and start time for messages. A lock
+file whose holder is gone is therefore simply taken over (a warning names the old holder). On file
+systems without ``flock`` (some network mounts) it falls back to creating the file with
+``O_CREAT | O_EXCL``; a lock left by a process that no longer runs on this host is then taken over.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import errno
+import json
+import os
+import socket
+import warnings
+
+__all__ = ["StoreLock", "StoreLockedError"]
+
+
+class StoreLockedError(ValueError):
+    """Another process is writing the store."""
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class StoreLock:
+    """``with StoreLock(path):`` or ``acquire()`` / ``release()``; ``holder()`` reads the record."""
+
+    def __init__(self, store: str):
+        self.store = os.fspath(store)
+        self.file = self.store.rstrip("/" + os.sep) + ".lock"
+        self._fd = None
+        self._exclusive = False
+
+    def holder(self) -> dict | None:
+        try:
+            with open(self.file, encoding="utf-8") as f:
+                return json.loads(f.read() or "null")
+        except (OSError, ValueError):
+            return None
+
+    def _record(self) -> bytes:
+        return json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
+                           "since": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}).encode()
+
+    def _refuse(self, holder):
+        who = (f"PID {holder.get('pid')} on host {holder.get('host')} (since {holder.get('since')})"
+               if isinstance(holder, dict) else "another process")
+        raise StoreLockedError(
+            f"{self.store} is being written by {who}: wait for it to finish, or stop it; the lock is {self.file} "
+            "(delete it only if that process is certainly gone)")
+
+    def acquire(self) -> None:
+        import fcntl
+
+        try:
+            fd = os.open(self.file, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise ValueError(f"out = {self.store}: cannot write there ({exc.strerror} for {self.file}); "
+                             "choose a writable path") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            self._refuse(self.holder())
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
+                return self._acquire_exclusive()
+            raise
+        previous = self.holder()
+        if isinstance(previous, dict) and previous.get("pid") is not None and not previous.get("released"):
+            warnings.warn(f"took over the stale lock {self.file} of PID {previous.get('pid')} on host "
+                          f"{previous.get('host')} (that process has ended)", UserWarning, stacklevel=3)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, self._record(), 0)
+        os.fsync(fd)
+        self._fd = fd
+
+    def _acquire_exclusive(self) -> None:
+        """Fallback without flock: O_EXCL creation; a dead holder on this host is taken over."""
+        for _ in range(2):
+            try:
+                fd = os.open(self.file, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            except FileExistsError:
+                holder = self.holder()
+                if (isinstance(holder, dict) and (holder.get("released") or (holder.get("host") == socket.gethostname()
+                                                                              and not _pid_alive(int(holder.get("pid", -1)))))):
+                    os.replace(self.file, f"{self.file}.stale-{os.getpid()}")
+                    os.unlink(f"{self.file}.stale-{os.getpid()}")
+                    continue
+                self._refuse(holder)
+            os.write(fd, self._record())
+            os.close(fd)
+            self._exclusive = True
+            return
+        self._refuse(self.holder())
+
+    def release(self) -> None:
+        if self._exclusive:
+            self._exclusive = False
+            try:
+                os.unlink(self.file)
+            except OSError:
+                pass
+        if self._fd is None:
+            return
+        import fcntl
+
+        try:
+            record = json.loads(self._record())
+            os.ftruncate(self._fd, 0)
+            os.pwrite(self._fd, json.dumps({**record, "released": True}).encode(), 0)
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+        finally:
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self):
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc):
+        self.release()

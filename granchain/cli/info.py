@@ -1,0 +1,123 @@
+"""``granchain info STORE``: what an ensemble store holds, whether it is intact, and how to go on."""
+
+from __future__ import annotations
+
+import json
+import os
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "info",
+        help="describe an ensemble store: parameters, family, integrator, progress, failures, size, how to resume",
+        description="Read an ensemble store written by `granchain ensemble` (or run_ensemble(out=...)) without changing it: "
+                    "its parameters, progress, integration failures, size on disk, the writer holding it (if any), "
+                    "a check of every finished chunk against its checksums, and the command that continues it.",
+    )
+    p.add_argument("store", help="the Zarr store, e.g. runs/N26.zarr")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=run)
+
+
+def _size(path: str) -> int:
+    total = 0
+    for root, _, files in os.walk(path):
+        for name in files:
+            try:
+                total += os.path.getsize(os.path.join(root, name))
+            except OSError:
+                pass
+    return total
+
+
+def _human(n: int) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if n < 1000 or unit == "TB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000.0
+    return str(n)
+
+
+def summary(path: str) -> dict:
+    """The facts ``granchain info`` prints (a dict, also its ``--json`` output)."""
+    import numpy as np
+    import zarr
+
+    from .._lock import StoreLock
+    from .._store import check_chunk, stored_parameters
+
+    if not os.path.isdir(path):
+        raise ValueError(f"{path} is not a directory: give the path of a Zarr store written by granchain ensemble")
+    record = stored_parameters(path)
+    if record is None:
+        raise ValueError(f"{path} is not a granchain ensemble store (no parameter record in .zattrs or progress/.zattrs)")
+    params = json.loads(record)
+    group = zarr.open_group(path, mode="r", zarr_format=2, use_consolidated=False)
+    R, cs = int(params["realizations"]), int(params["chunk_size"])
+    n_chunks = -(-R // cs)
+    try:
+        done = np.asarray(group["progress/done"][...])
+    except Exception:  # noqa: BLE001
+        done = np.zeros(n_chunks, dtype=np.int8)
+    names = [str(x) for x in group["progress/checked"][...]]
+    damaged = {}
+    for j in np.flatnonzero(done == 1):
+        reason = check_chunk(path, group, int(j), names, slice(int(j) * cs, min((int(j) + 1) * cs, R)))
+        if reason:
+            damaged[int(j)] = reason
+    try:
+        status = np.asarray(group["status"][...])
+        chains = [str(c) for c in group["chain"][...]]
+        codes, counts = np.unique(status, return_counts=True)
+        failures = {chain: int(((status[i] != 0) & (status[i] != -1)).sum()) for i, chain in enumerate(chains)}
+        status_counts = {int(c): int(n) for c, n in zip(codes, counts)}
+    except Exception:  # noqa: BLE001
+        failures, status_counts = None, None
+    holder = StoreLock(path).holder()
+    writing = None
+    if isinstance(holder, dict) and not holder.get("released"):
+        writing = holder
+    done_r = sum(min((j + 1) * cs, R) - j * cs for j in np.flatnonzero(done == 1))
+    return {"store": path, "family": params["family"], "integrator": params["integrator"], "realizations": R,
+            "seed": params["seed"], "chains": params["chains"], "chunk_size": cs, "chunks_done": int((done == 1).sum()),
+            "chunks": n_chunks, "realizations_done": int(done_r), "complete": bool((done == 1).all()),
+            "damaged_chunks": damaged, "failed_integrations": failures, "status_counts": status_counts,
+            "size_bytes": _size(path), "lock": writing, "granchain_version": params.get("granchain_version")}
+
+
+def run(args) -> int:
+    from .._status import Status
+
+    info = summary(args.store)
+    if args.json:
+        print(json.dumps(info, indent=1, sort_keys=True))
+        return 0
+    fam = dict(info["family"])
+    integ = dict(info["integrator"])
+    lines = [
+        f"store        {info['store']} ({_human(info['size_bytes'])} on disk, granchain {info['granchain_version']})",
+        f"family       {fam.pop('family', '?')}: " + ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(fam.items())),
+        f"integrator   {integ.pop('name', '?')}: " + ", ".join(f"{k}={v}" for k, v in sorted(integ.items())),
+        f"run          {info['realizations']} realisations, seed {info['seed']}, chains {', '.join(info['chains'])}, "
+        f"chunks of {info['chunk_size']}",
+        f"progress     {info['chunks_done']}/{info['chunks']} chunks done ({info['realizations_done']} realisations)"
+        + (": complete" if info["complete"] else ""),
+    ]
+    if info["status_counts"] is not None:
+        names = {-1: "NOT_COMPUTED", **{int(s): s.name for s in Status}}
+        lines.append("status       " + ", ".join(f"{names.get(c, c)}: {n}" for c, n in sorted(info["status_counts"].items())))
+        lines.append("failures     " + ", ".join(f"{c}: {n}" for c, n in info["failed_integrations"].items()))
+    if info["lock"]:
+        h = info["lock"]
+        lines.append(f"writer       PID {h.get('pid')} on {h.get('host')} since {h.get('since')} (if it has ended, "
+                     "the next run takes the lock over)")
+    for j, reason in info["damaged_chunks"].items():
+        lines.append(f"damaged      chunk {j} {reason}")
+    if info["damaged_chunks"] or not info["complete"]:
+        lines.append("to continue  run the same `granchain ensemble ... --out STORE` command again (or run_ensemble with the "
+                     "same arguments and out=STORE): damaged and missing chunks are recomputed; a larger --realizations "
+                     "extends the store")
+    else:
+        lines.append("intact       every chunk matches its checksums; export with: granchain export STORE FILE.nc")
+    print("\n".join(lines))
+    return 0
