@@ -143,22 +143,28 @@ def _compute_chunk(spec: EnsembleSpec, j: int) -> dict:
     family = spec.family
     params = family.draw_batch(spec.seed, idx)
     R, K, T, nc = idx.size, family.n_observed, spec.t_grid.size, len(spec.chains)
+    C = family.n_contacts
     out = {
         "chunk": j,
         "realizations": R,
         **params,
         "peak_velocity": np.zeros((nc, R, K)),
         "peak_time": np.zeros((nc, R, K)),
+        "peak_force": np.zeros((nc, R, C)),
+        "peak_force_time": np.zeros((nc, R, C)),
+        "peak_wall": np.full((nc, R, 2), np.nan),  # the wall's peak force and its time (families with a wall)
         "status": np.zeros((nc, R), dtype=np.int64),
         "energy_error": np.zeros((nc, R)),
         "n_steps": np.zeros((nc, R), dtype=np.int64),
         "t_end": np.zeros((nc, R)),
         "sum_v": np.zeros((nc, T, K), dtype=np.int64),  # time-major in the kernels
         "sum_v2": np.zeros((nc, T, K), dtype=np.int64),
+        "sum_wall": np.zeros((nc, T), dtype=np.int64),  # fixed-point sums of the wall force on the grid
         "n_valid": np.zeros((nc, 1), dtype=np.int64),
     }
     scale = float(2.0**spec.fixed_point_bits)
-    per_chain = ("peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end", "sum_v", "sum_v2", "n_valid")
+    per_chain = ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "peak_wall", "status", "energy_error", "n_steps",
+                 "t_end", "sum_v", "sum_v2", "sum_wall", "n_valid")
     for ci, name in enumerate(spec.chains):
         batch = family.build(params, name)
         masses = np.ascontiguousarray(batch.masses, dtype=float)
@@ -166,9 +172,11 @@ def _compute_chunk(spec: EnsembleSpec, j: int) -> dict:
         t_max = max(time_limit(masses.shape[1], float(v0.min()), batch.n), float(spec.t_grid[-1]))
         spec.integrator.integrate_batch(
             masses, np.ascontiguousarray(batch.stiffness, dtype=float), batch.n, v0,
-            np.ascontiguousarray(batch.observed, dtype=np.int64), t_grid=spec.t_grid, t_max=t_max, controls=spec.controls,
-            scale=scale, out={k: out[k][ci] for k in per_chain},
+            np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),
+            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, out={k: out[k][ci] for k in per_chain},
         )
+    out["peak_wall_force"] = np.ascontiguousarray(out["peak_wall"][..., 0])
+    out["peak_wall_force_time"] = np.ascontiguousarray(out["peak_wall"][..., 1])
     out["sum_v"] = np.ascontiguousarray(out["sum_v"].transpose(0, 2, 1))  # (chain, granule, time)
     out["sum_v2"] = np.ascontiguousarray(out["sum_v2"].transpose(0, 2, 1))
     return out

@@ -26,10 +26,12 @@ import numpy as np
 from ._status import NOT_COMPUTED, Status, describe_codes
 from ._version import __version__
 
-__all__ = ["Variable", "RESULTS", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "stored_record"]
+__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "stored_record",
+           "result_variables"]
 
 UNITS_V = "V_1 (velocity of the struck granule; rescaled, paper Sec. II)"
 UNITS_T = "rescaled time (paper Sec. II)"
+UNITS_F = "M_1 L / T^2 (rescaled force, paper Eq. motion_rescaled; granchain.units converts to N)"
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,33 @@ RESULTS = (
     Variable("n_steps", ("chain", "realization"), "int64", -1, "1", "accepted integration steps"),
     Variable("t_end", ("chain", "realization"), "float64", np.nan, UNITS_T, "time the integration stopped"),
 )
+
+#: Peak contact forces per realisation. The ``contact`` dimension is the family's
+#: (:meth:`granchain.ChainFamily.contact_coordinate`), the same for every chain of the family:
+#: decorated families, contact q on the right of large granule q (decorated chain: large granule q
+#: and small granule q; effective chain: q and q+1); other families, every contact (q and q+1).
+FORCES = (
+    Variable("peak_force", ("chain", "realization", "contact"), "float64", np.nan, UNITS_F,
+             "maximum contact force c delta^(n-1) of contact q (decorated families: the contact on the right of "
+             "large granule q; other families: between granules q and q+1)"),
+    Variable("peak_force_time", ("chain", "realization", "contact"), "float64", np.nan, UNITS_T,
+             "time of the maximum force of contact q (the compression maximum)"),
+)
+
+#: Families with a rigid wall at the far end (``wall=True``): the wall contact's peak force.
+WALL = (
+    Variable("peak_wall_force", ("chain", "realization"), "float64", np.nan, UNITS_F,
+             "maximum force on the rigid wall at the far end of the chain"),
+    Variable("peak_wall_force_time", ("chain", "realization"), "float64", np.nan, UNITS_T,
+             "time of the maximum force on the wall"),
+)
+
+
+def result_variables(family) -> tuple:
+    """The per-realisation results a family's store holds: :data:`RESULTS`, :data:`FORCES`, and
+    :data:`WALL` when its chains end in a wall."""
+    return RESULTS + FORCES + (WALL if family.wall else ())
+
 
 #: The averaged pulse, computed from the exact fixed-point sums once every chunk is done.
 AVERAGED = (
@@ -97,7 +126,7 @@ def parameter_variables(family) -> tuple:
 
 def _sizes(spec) -> dict:
     return {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
-            **spec.family.dim_sizes()}
+            "contact": spec.family.n_contacts, **spec.family.dim_sizes()}
 
 
 def _attrs(spec) -> dict:
@@ -166,10 +195,11 @@ def empty_dataset(spec, lazy: bool):
                         {"long_name": "realisation index i (random parameters from SeedSequence(seed, spawn_key=(i,)))"}),
         "granule": ("granule", np.asarray(granules), {"long_name": granule_name}),
         "time": ("time", np.asarray(spec.t_grid), {"units": UNITS_T, "long_name": "time"}),
+        "contact": ("contact", np.asarray(family.contact_coordinate()[0]), {"long_name": family.contact_coordinate()[1]}),
     }
     for dim, (values, long_name) in family.dims().items():
         coords[dim] = (dim, np.asarray(values), {"long_name": long_name})
-    variables = parameter_variables(family) + RESULTS + AVERAGED
+    variables = parameter_variables(family) + result_variables(family) + AVERAGED
     return xr.Dataset({v.name: var(v) for v in variables}, coords=coords, attrs=_attrs(spec))
 
 
@@ -192,7 +222,8 @@ def chunk_dataset(spec, res: dict):
     """The per-realisation variables of one finished chunk (the family's parameters and the results)."""
     import xarray as xr
 
-    out = {v.name: (v.dims, np.asarray(res[v.name]).astype(v.dtype, copy=False)) for v in parameter_variables(spec.family) + RESULTS}
+    out = {v.name: (v.dims, np.asarray(res[v.name]).astype(v.dtype, copy=False))
+           for v in parameter_variables(spec.family) + result_variables(spec.family)}
     return xr.Dataset(out)
 
 
