@@ -175,10 +175,10 @@ def _masses_with_wall(masses) -> np.ndarray:
         a = np.array(masses, dtype=float).reshape(-1) if np.ndim(masses) <= 1 else None
     except (TypeError, ValueError):
         a = None
+    if a is not None and a.size >= 2 and np.isinf(a[:-1]).any():
+        i = int(np.flatnonzero(np.isinf(a[:-1]))[0])
+        raise ValueError(f"masses: entry {i} is infinite; only the last granule may be infinitely heavy (a rigid wall)")
     if a is not None and a.size >= 2 and a[-1] == np.inf:
-        if np.isinf(a[:-1]).any():
-            i = int(np.flatnonzero(np.isinf(a[:-1]))[0])
-            raise ValueError(f"masses: entry {i} is infinite; only the last granule may be infinitely heavy (a wall)")
         return np.append(positive_array("masses", a[:-1], min_size=1), np.inf)
     return positive_array("masses", masses, min_size=2)
 
