@@ -91,20 +91,15 @@ def test_peak_forces_agree_with_dop853(dop853_runs):
     assert worst_t_tight < 1e-6, worst_t_tight
 
 
-def test_peak_force_is_the_largest_force_on_a_fine_grid(dop853_runs):
-    """The located peak bounds the force sampled on a fine grid (from granule velocities
-    integrated to positions is not available, so sample with t_grid on a two-contact chain)."""
-    chain = gc.from_radii([1.0, 0.3, 1.0])
+def test_located_peak_is_the_maximum_of_the_sampled_force():
+    """The wall force is sampled on t_grid: the located peak bounds every sample and equals the
+    grid maximum to second order in the grid spacing (a negative control for the root search)."""
     grid = np.linspace(0.0, 6.0, 6001)
-    fine = gc.simulate(chain, t_grid=grid, stop="t_max", t_max=6.0)
-    walled = gc.simulate(chain.with_wall(), t_grid=grid, stop="t_max", t_max=6.0)
-    # With a wall, the wall force is sampled on the grid: its located peak is the grid maximum
-    # to second order in the grid spacing.
-    assert walled.peak_wall_force >= walled.wall_force.max() * (1 - 1e-12)
-    assert walled.peak_wall_force == pytest.approx(walled.wall_force.max(), rel=1e-5)
-    i = int(np.argmax(walled.wall_force))
-    assert walled.peak_wall_force_time == pytest.approx(grid[i], abs=1e-3)
-    assert fine.ok
+    res = gc.simulate(gc.from_radii([1.0, 0.3, 1.0], wall=True), t_grid=grid, stop="t_max", t_max=6.0)
+    assert res.ok
+    assert res.peak_wall_force >= res.wall_force.max() * (1 - 1e-12)
+    assert res.peak_wall_force == pytest.approx(res.wall_force.max(), rel=1e-5)
+    assert res.peak_wall_force_time == pytest.approx(grid[int(np.argmax(res.wall_force))], abs=1e-3)
 
 
 # -- 3. Verlet converges at order 2 -------------------------------------------------------------------
