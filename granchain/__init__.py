@@ -5,7 +5,7 @@ The founding reference is U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg,
 """
 
 from ._version import __version__
-from ._chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered
+from ._chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered, wall_stiffness
 from ._distributions import Truncated, Uniform, as_distribution, small_radius_distribution
 from ._effective import effective, effective_parameters
 from ._random import draw_small_radii, random_decorated, realization_rng
@@ -74,6 +74,7 @@ __all__ = [
     "simulate",
     "small_radius_distribution",
     "sphere_stiffness",
+    "wall_stiffness",
     "tapered",
     "to_physical",
 ]

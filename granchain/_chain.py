@@ -8,6 +8,12 @@ motion_rescaled). Everything the integrators need is in ``masses``,
 ``stiffness``, ``n`` and ``initial_velocity``; ``observed`` names the granules
 whose peak velocity and peak time are recorded.
 
+A rigid wall at the far end is the same representation: a last granule of
+infinite radius and mass (``masses[-1] = inf``, inverse mass 0) whose contact
+stiffness is the limit of Eq. (r-prime) for R_{M} -> infinity, sqrt(2 R_{M-1})
+(:func:`wall_stiffness`). Build one with ``wall=True`` on the builders or
+:meth:`Chain.with_wall`; the free end stays the default (the paper's case).
+
 Units are the paper's rescaled ones (Sec. II): radii in units of the radius of
 the reference (first, large) granule, masses m = R^3 in units of its mass, time
 and displacement as in Eq. (motion_rescaled).
@@ -30,6 +36,7 @@ __all__ = [
     "regular_decorated",
     "sphere_mass",
     "sphere_stiffness",
+    "wall_stiffness",
 ]
 
 HERTZ = 2.5
@@ -48,7 +55,8 @@ class Chain:
     Parameters
     ----------
     masses : (M,) array, M >= 2
-        Granule masses m_k > 0.
+        Granule masses m_k > 0. The last may be ``numpy.inf``: a rigid wall (it never
+        moves, is never observed, and takes the pulse's impulse; see :attr:`wall`).
     stiffness : (M-1,) array
         Contact prefactors c_k > 0: the force between k and k+1 is
         c_k * delta^(n-1) for delta > 0 (paper: r_k for spheres, Eq. r-prime;
@@ -61,7 +69,7 @@ class Chain:
         0-based indices of the granules whose pulse is recorded, ascending
         (default: all). For decorated chains these are the large granules.
     radii : (M,) array or None
-        Radii the chain was built from (None for an effective chain).
+        Radii the chain was built from (None for an effective chain); ``inf`` for a wall.
     kind : str
         A short description ("radii", "decorated", "effective", ...).
     """
@@ -76,7 +84,7 @@ class Chain:
     meta: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self):
-        m = positive_array("masses", self.masses, min_size=2)
+        m = _masses_with_wall(self.masses)
         c = positive_array("stiffness", self.stiffness)
         if c.size != m.size - 1:
             raise ValueError(
@@ -84,8 +92,9 @@ class Chain:
             )
         n = exponent(self.n)
         v0 = finite_scalar("initial_velocity", self.initial_velocity, positive=True)
+        wall = bool(np.isinf(m[-1]))
         if self.observed is None:
-            obs = np.arange(m.size, dtype=np.int64)
+            obs = np.arange(m.size - wall, dtype=np.int64)
         else:
             obs = np.asarray(self.observed)
             if obs.ndim != 1 or obs.size == 0 or not np.issubdtype(obs.dtype, np.integer):
@@ -95,7 +104,10 @@ class Chain:
                 raise ValueError(f"observed indices must lie in 0..{m.size - 1} (0-based), got {obs.tolist()}")
             if np.any(np.diff(obs) <= 0):
                 raise ValueError("observed indices must be strictly increasing (no repeats)")
-        radii = None if self.radii is None else positive_array("radii", self.radii, min_size=m.size)
+            if wall and obs[-1] == m.size - 1:
+                raise ValueError(f"observed includes granule {m.size - 1} (0-based), the wall (infinite mass), which never moves: "
+                                 f"observe granules 0..{m.size - 2}")
+        radii = None if self.radii is None else _radii_with_wall(self.radii, wall)
         if radii is not None and radii.size != m.size:
             raise ValueError(f"radii has {radii.size} entries for {m.size} granules")
         object.__setattr__(self, "masses", _frozen(m))
@@ -112,14 +124,39 @@ class Chain:
         return int(self.masses.size)
 
     @property
+    def wall(self) -> bool:
+        """Whether the last granule is a rigid wall (infinite mass)."""
+        return bool(np.isinf(self.masses[-1]))
+
+    @property
     def energy(self) -> float:
-        """Total energy, all kinetic at t = 0: m_1 v_1^2 / 2."""
+        """Total energy, all kinetic at t = 0: m_1 v_1^2 / 2 (a wall, at rest, has none)."""
         return 0.5 * float(self.masses[0]) * self.initial_velocity**2
 
     @property
     def momentum(self) -> float:
-        """Total momentum m_1 v_1 (conserved: free ends, no walls)."""
+        """Total momentum m_1 v_1 of the granules (conserved with free ends; with a wall the
+        granules lose the wall's impulse, :attr:`granchain.PulseResult.wall_impulse`)."""
         return float(self.masses[0]) * self.initial_velocity
+
+    def with_wall(self, stiffness: float | None = None) -> "Chain":
+        """The same chain ending in a rigid wall: one more granule, of infinite mass.
+
+        The wall contact's stiffness is ``stiffness`` or, for a chain built from radii,
+        sqrt(2 R_M) (:func:`wall_stiffness`, the limit of Eq. r-prime). A chain without
+        radii (e.g. an effective chain) needs ``stiffness``.
+        """
+        if self.wall:
+            raise ValueError("this chain already ends in a wall")
+        if stiffness is None:
+            if self.radii is None:
+                raise ValueError(f"a {self.kind} chain has no radii to give the wall contact its stiffness sqrt(2 R_M): "
+                                 "pass stiffness=... (the prefactor c of the wall force c delta^(n-1))")
+            stiffness = wall_stiffness(self.radii[-1])
+        c_wall = finite_scalar("stiffness", stiffness, positive=True)
+        radii = None if self.radii is None else np.append(self.radii, np.inf)
+        return Chain(np.append(self.masses, np.inf), np.append(self.stiffness, c_wall), self.n, self.initial_velocity,
+                     self.observed, radii, self.kind, dict(self.meta))
 
     def with_observed(self, observed) -> "Chain":
         """The same chain observing other granules (0-based indices)."""
@@ -127,9 +164,41 @@ class Chain:
 
     def __repr__(self) -> str:
         return (
-            f"Chain(kind={self.kind!r}, M={self.size}, n={self.n:g}, "
+            f"Chain(kind={self.kind!r}, M={self.size}{' (the last a wall)' if self.wall else ''}, n={self.n:g}, "
             f"initial_velocity={self.initial_velocity:g}, observed={self.observed.size} granules)"
         )
+
+
+def _masses_with_wall(masses) -> np.ndarray:
+    """Positive finite masses, except that the last may be +inf (a wall)."""
+    try:
+        a = np.array(masses, dtype=float).reshape(-1) if np.ndim(masses) <= 1 else None
+    except (TypeError, ValueError):
+        a = None
+    if a is not None and a.size >= 2 and np.isinf(a[:-1]).any():
+        i = int(np.flatnonzero(np.isinf(a[:-1]))[0])
+        raise ValueError(f"masses: entry {i} is infinite; only the last granule may be infinitely heavy (a rigid wall)")
+    if a is not None and a.size >= 2 and a[-1] == np.inf:
+        return np.append(positive_array("masses", a[:-1], min_size=1), np.inf)
+    return positive_array("masses", masses, min_size=2)
+
+
+def _radii_with_wall(radii, wall: bool) -> np.ndarray:
+    if wall:
+        r = np.array(radii, dtype=float).reshape(-1)
+        if r.size < 1 or r[-1] != np.inf:
+            raise ValueError("radii of a chain ending in a wall must end with inf (the wall's radius)")
+        return np.append(positive_array("radii", r[:-1]), np.inf)
+    return positive_array("radii", radii)
+
+
+def wall_stiffness(radius) -> np.ndarray:
+    """Contact prefactor of a sphere of radius R against a rigid wall: sqrt(2 R).
+
+    The limit of Eq. (r-prime), sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})), for R_{k+1} -> infinity
+    (a flat wall of the same material). Works on arrays (a batch of last radii).
+    """
+    return np.sqrt(2.0 * np.asarray(radius, dtype=float))  # Eq. (r-prime), R_{k+1} -> inf
 
 
 def sphere_mass(radii: np.ndarray) -> np.ndarray:
@@ -148,25 +217,29 @@ def sphere_stiffness(radii: np.ndarray) -> np.ndarray:
     return np.sqrt(2.0 * r[..., :-1] * r[..., 1:] / (r[..., :-1] + r[..., 1:]))  # Eq. (r-prime)
 
 
-def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observed=None, kind: str = "radii") -> Chain:
+def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observed=None, kind: str = "radii",
+               wall: bool = False) -> Chain:
     """A chain of spheres of one material from any list of radii.
 
     m_k = R_k^3 (paper Sec. II: M_k = M_1 m_k with equal density), stiffness from
     Eq. (r-prime). All granules are observed unless ``observed`` says otherwise.
+    ``wall=True`` ends the chain in a rigid wall (:meth:`Chain.with_wall`).
     """
     r = positive_array("radii", radii, min_size=1)
     if r.size < 2:
         raise ValueError(f"a chain needs at least 2 granules, got {r.size} radius")
-    return Chain(sphere_mass(r), sphere_stiffness(r), n, initial_velocity, observed, r, kind)
+    chain = Chain(sphere_mass(r), sphere_stiffness(r), n, initial_velocity, observed, r, kind)
+    return chain.with_wall() if wall else chain
 
 
-def monodisperse(size: int, *, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
-    """``size`` equal spheres of radius 1."""
+def monodisperse(size: int, *, n: float = HERTZ, initial_velocity: float = 1.0, wall: bool = False) -> Chain:
+    """``size`` equal spheres of radius 1 (and a rigid wall after them with ``wall=True``)."""
     size = count("size", size, minimum=2)
-    return from_radii(np.ones(size), n=n, initial_velocity=initial_velocity, kind="monodisperse")
+    return from_radii(np.ones(size), n=n, initial_velocity=initial_velocity, kind="monodisperse", wall=wall)
 
 
-def tapered(size: int, q: float, *, profile: str = "geometric", n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+def tapered(size: int, q: float, *, profile: str = "geometric", n: float = HERTZ, initial_velocity: float = 1.0,
+            wall: bool = False) -> Chain:
     """A tapered chain starting from radius 1.
 
     ``profile="geometric"``: R_k = (1 - q)^(k-1); ``profile="linear"``:
@@ -188,10 +261,10 @@ def tapered(size: int, q: float, *, profile: str = "geometric", n: float = HERTZ
             )
     else:
         raise ValueError(f"profile must be 'geometric' or 'linear', got {profile!r}")
-    return from_radii(radii, n=n, initial_velocity=initial_velocity, kind=f"tapered-{profile}")
+    return from_radii(radii, n=n, initial_velocity=initial_velocity, kind=f"tapered-{profile}", wall=wall)
 
 
-def decorated(small_radii, *, large_radius=1.0, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+def decorated(small_radii, *, large_radius=1.0, n: float = HERTZ, initial_velocity: float = 1.0, wall: bool = False) -> Chain:
     """N large granules with one small granule between each pair (paper Sec. III A).
 
     ``small_radii`` (N-1 values, in units of the reference radius) sit between
@@ -200,7 +273,8 @@ def decorated(small_radii, *, large_radius=1.0, n: float = HERTZ, initial_veloci
     decorated chain, :class:`granchain.TaperedDecorated`). A small granule may not
     be larger than its smaller neighbour (use :func:`from_radii` for any other
     chain). The chain has 2N-1 granules, both ends large, and observes the large
-    granules (0-based indices 0, 2, ..., 2N-2).
+    granules (0-based indices 0, 2, ..., 2N-2). ``wall=True`` adds a rigid wall after
+    large granule N (granule 2N, never observed).
     """
     s = positive_array("small_radii", small_radii, min_size=1)
     if np.ndim(large_radius) == 0:
@@ -222,15 +296,14 @@ def decorated(small_radii, *, large_radius=1.0, n: float = HERTZ, initial_veloci
     radii[1::2] = s
     chain = from_radii(radii, n=n, initial_velocity=initial_velocity, observed=np.arange(0, radii.size, 2), kind="decorated")
     chain.meta["small_radii"] = s
-    return chain
+    return chain.with_wall() if wall else chain
 
 
-def regular_decorated(size: int, pattern, *, n: float = HERTZ, initial_velocity: float = 1.0) -> Chain:
+def regular_decorated(size: int, pattern, *, n: float = HERTZ, initial_velocity: float = 1.0, wall: bool = False) -> Chain:
     """A decorated chain of ``size`` large granules whose small radii repeat ``pattern``.
 
     ``pattern=(0.3,)`` puts R = 0.3 in every gap; ``(0.2, 0.4)`` alternates.
     """
     size = count("size", size, minimum=2)
     pat = positive_array("pattern", pattern, min_size=1)
-    chain = decorated(np.resize(pat, size - 1), n=n, initial_velocity=initial_velocity)
-    return chain
+    return decorated(np.resize(pat, size - 1), n=n, initial_velocity=initial_velocity, wall=wall)

@@ -58,10 +58,16 @@ def effective(chain: Chain, *, momentum_conserving: bool = False) -> Chain:
     chain's impulse, the default: best arrival times) or, with
     ``momentum_conserving=True``, with m_1 v_1 / mu_1 so that momentum matches.
     Warns (:class:`granchain.EffectiveValidityWarning`) when a small radius
-    exceeds 0.4 of its neighbours.
+    exceeds 0.4 of its neighbours. A decorated chain ending in a wall gives an effective
+    chain ending in the same wall: large granule N touches it directly, with the decorated
+    chain's wall stiffness sqrt(2 R_N).
     """
     if not isinstance(chain, Chain):
         raise ValueError(f"effective() needs a decorated granchain.Chain, got {type(chain).__name__}")
+    if chain.wall:
+        free = Chain(chain.masses[:-1], chain.stiffness[:-1], chain.n, chain.initial_velocity, chain.observed,
+                     chain.radii[:-1] if chain.radii is not None else None, chain.kind, dict(chain.meta))
+        return effective(free, momentum_conserving=momentum_conserving).with_wall(float(chain.stiffness[-1]))
     if chain.radii is None or chain.size % 2 == 0 or chain.size < 3:
         raise ValueError(
             "effective() needs a decorated chain built from radii with an odd number of granules "

@@ -157,25 +157,35 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_pro
             on_progress(parts[-1]["realizations"])
             step = max(step, int((stop - start) * PROGRESS_SECONDS / max(elapsed, 1e-3)))
             start = stop
-        return _merge(parts)
+        return _merge(parts, spec.family)
     finally:
         numba.set_num_threads(previous)
 
 
-def _merge(parts: list) -> dict:
-    """One chunk's result from the results of consecutive batches of its realisations."""
+#: Arrays of a chunk's result with a realisation axis that are not store variables themselves
+#: (the wall's (peak force, time) buffer is split into peak_wall_force and peak_wall_force_time).
+_INTERNAL_REALISATION_AXIS = {"peak_wall": 1, "peak_wall_force": 1, "peak_wall_force_time": 1}
+
+
+def _merge(parts: list, family) -> dict:
+    """One chunk's result from the results of consecutive batches of its realisations: per-realisation
+    arrays are joined along their ``realization`` axis (read from the store schema), the fixed-point
+    sums added. An array the schema does not name is an error, never a silent wrong join."""
+    from ._store import per_realisation_variables
+
     if len(parts) == 1:
         return parts[0]
+    axis = {v.name: v.dims.index("realization") for v in per_realisation_variables(family)} | _INTERNAL_REALISATION_AXIS
     out = {"chunk": parts[0]["chunk"], "realizations": sum(p["realizations"] for p in parts)}
-    for key, first in parts[0].items():
+    for key in parts[0]:
         if key in out:
             continue
-        if key in ("sum_v", "sum_v2", "n_valid"):  # exact integer sums
+        if key.startswith("sum_") or key == "n_valid":  # exact integer sums
             out[key] = sum(p[key] for p in parts)
-        elif key in ("peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end"):  # (chain, realization, ...)
-            out[key] = np.concatenate([p[key] for p in parts], axis=1)
-        else:  # the family's parameters, (realization, ...)
-            out[key] = np.concatenate([p[key] for p in parts], axis=0)
+        elif key in axis:
+            out[key] = np.concatenate([p[key] for p in parts], axis=axis[key])
+        else:
+            raise KeyError(f"chunk result {key!r} is neither a store variable nor a sum: add it to the schema (_store.py)")
     return out
 
 
@@ -185,22 +195,28 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
     family = spec.family
     params = family.draw_batch(spec.seed, idx)
     R, K, T, nc = idx.size, family.n_observed, spec.t_grid.size, len(spec.chains)
+    C = family.n_contacts
     out = {
         "chunk": j,
         "realizations": R,
         **params,
         "peak_velocity": np.zeros((nc, R, K)),
         "peak_time": np.zeros((nc, R, K)),
+        "peak_force": np.zeros((nc, R, C)),
+        "peak_force_time": np.zeros((nc, R, C)),
+        "peak_wall": np.full((nc, R, 2), np.nan),  # the wall's peak force and its time (families with a wall)
         "status": np.zeros((nc, R), dtype=np.int64),
         "energy_error": np.zeros((nc, R)),
         "n_steps": np.zeros((nc, R), dtype=np.int64),
         "t_end": np.zeros((nc, R)),
         "sum_v": np.zeros((nc, T, K), dtype=np.int64),  # time-major in the kernels
         "sum_v2": np.zeros((nc, T, K), dtype=np.int64),
+        "sum_wall": np.zeros((nc, T), dtype=np.int64),  # fixed-point sums of the wall force on the grid
         "n_valid": np.zeros((nc, 1), dtype=np.int64),
     }
     scale = float(2.0**spec.fixed_point_bits)
-    per_chain = ("peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end", "sum_v", "sum_v2", "n_valid")
+    per_chain = ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "peak_wall", "status", "energy_error", "n_steps",
+                 "t_end", "sum_v", "sum_v2", "sum_wall", "n_valid")
     for ci, name in enumerate(spec.chains):
         batch = family.build(params, name)
         masses = np.ascontiguousarray(batch.masses, dtype=float)
@@ -208,9 +224,11 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
         t_max = max(time_limit(masses.shape[1], float(v0.min()), batch.n), float(spec.t_grid[-1]))
         spec.integrator.integrate_batch(
             masses, np.ascontiguousarray(batch.stiffness, dtype=float), batch.n, v0,
-            np.ascontiguousarray(batch.observed, dtype=np.int64), t_grid=spec.t_grid, t_max=t_max, controls=spec.controls,
-            scale=scale, out={k: out[k][ci] for k in per_chain},
+            np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),
+            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, out={k: out[k][ci] for k in per_chain},
         )
+    out["peak_wall_force"] = np.ascontiguousarray(out["peak_wall"][..., 0])
+    out["peak_wall_force_time"] = np.ascontiguousarray(out["peak_wall"][..., 1])
     out["sum_v"] = np.ascontiguousarray(out["sum_v"].transpose(0, 2, 1))  # (chain, granule, time)
     out["sum_v2"] = np.ascontiguousarray(out["sum_v2"].transpose(0, 2, 1))
     return out

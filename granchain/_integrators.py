@@ -24,7 +24,7 @@ import numpy as np
 
 from ._kernels._common import INFO_SIZE, INFO_STEPS, INFO_T_END, power_code, total_energy
 from ._kernels._dispatch import KERNEL_DP5, KERNEL_VERLET, integrate_chain
-from ._kernels._ensemble import accumulate_fixed_point, integrate_batch
+from ._kernels._ensemble import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces, integrate_batch
 from ._reference import dop853_integrate
 from ._validate import count, finite_scalar
 
@@ -65,9 +65,10 @@ class RunControls:
         object.__setattr__(self, "max_steps", count("max_steps", self.max_steps, minimum=1))
 
 
-def _outputs(n_observed: int, n_grid: int):
-    # velocities time-major: one contiguous row per grid time
-    return np.zeros(n_observed), np.zeros(n_observed), np.zeros((n_grid, n_observed)), np.zeros(INFO_SIZE)
+def _outputs(n_observed: int, n_grid: int, n_granules: int):
+    # velocities time-major: one contiguous row per grid time; forces per contact (M - 1)
+    return (np.zeros(n_observed), np.zeros(n_observed), np.zeros((n_grid, n_observed)), np.zeros(n_granules - 1),
+            np.zeros(n_granules - 1), np.zeros(n_grid), np.zeros(INFO_SIZE))
 
 
 class Integrator:
@@ -83,37 +84,47 @@ class Integrator:
     def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state).
 
-        Returns (status, info, peak_v, peak_t, grid_v), see ``granchain._kernels._dispatch``.
+        Returns (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f), see
+        ``granchain._kernels._dispatch``: peak_f, peak_ft per contact (M - 1), grid_f the wall force
+        on the grid (zeros without a wall).
         """
         raise NotImplementedError
 
-    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, *, t_grid, t_max, controls: RunControls,
-                        scale: float, out: dict) -> None:
+    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
+                        controls: RunControls, scale: float, out: dict) -> None:
         """Integrate a batch of chains (rows of ``masses`` (R, M), ``stiffness`` (R, M-1),
-        ``initial_velocity`` (R,), shared ``observed``), stopping at the pulse's exit.
+        ``initial_velocity`` (R,), shared ``observed`` and recorded ``contacts``, 0-based),
+        stopping at the pulse's exit (or its return from a wall).
 
-        Writes ``out["peak_velocity"]``/``["peak_time"]`` (R, K), ``["status"]``,
+        Writes ``out["peak_velocity"]``/``["peak_time"]`` (R, K), ``["peak_force"]``/
+        ``["peak_force_time"]`` (R, C) of the contacts ``contacts``, ``["peak_wall"]`` (R, 2: the
+        wall's peak force and its time; only for chains ending in a wall), ``["status"]``,
         ``["energy_error"]``, ``["n_steps"]``, ``["t_end"]`` (R,), adds the fixed-point
-        sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) and
-        counts them in ``["n_valid"]`` (1,). This generic version loops in Python over
-        :meth:`integrate`; compiled integrators override it with a parallel kernel.
+        sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) (and of
+        the wall force to ``["sum_wall"]`` (T,)) and counts them in ``["n_valid"]`` (1,). This
+        generic version loops in Python over :meth:`integrate`; compiled integrators override it
+        with a parallel kernel.
         """
         from ._chain import Chain
 
         R, M = masses.shape
+        wall = bool(np.isinf(masses[0, -1]))
         for r in range(R):
             chain = Chain(masses[r], stiffness[r], n, initial_velocity[r], observed)
             x, v = np.zeros(M), np.zeros(M)
             v[0] = initial_velocity[r]
-            st, info, peak_v, peak_t, grid_v = self.integrate(chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=True,
-                                                              controls=controls)
+            st, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = self.integrate(
+                chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=True, controls=controls)
             out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
+            gather_forces(peak_f, peak_ft, contacts, wall, out["peak_force"][r], out["peak_force_time"][r], out["peak_wall"][r])
             out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]
             e0 = 0.5 * masses[r, 0] * initial_velocity[r] * initial_velocity[r]  # the expression of the compiled batch
             out["energy_error"][r] = (total_energy(x, v, masses[r], stiffness[r], n) - e0) / e0
             if st == 0:
                 out["n_valid"][0] += 1
                 accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])
+                if wall:
+                    accumulate_fixed_point_1d(grid_f, scale, out["sum_wall"])
 
 
 class _Compiled(Integrator):
@@ -125,23 +136,24 @@ class _Compiled(Integrator):
         raise NotImplementedError
 
     def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
-        peak_v, peak_t, grid_v, info = _outputs(chain.observed.size, t_grid.size)
+        peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info = _outputs(chain.observed.size, t_grid.size, chain.size)
         status = integrate_chain(
             self.kernel_id, self.kernel_params(), chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.observed,
             t_max, stop_at_exit, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, x, v,
-            peak_v, peak_t, grid_v, info,
+            peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
         )
-        return int(status), info, peak_v, peak_t, grid_v
+        return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f
 
-    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, *, t_grid, t_max, controls: RunControls,
-                        scale: float, out: dict) -> None:
+    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
+                        controls: RunControls, scale: float, out: dict) -> None:
         import numba
 
         integrate_batch(
-            self.kernel_id, self.kernel_params(), masses, stiffness, n, power_code(n), initial_velocity, observed, t_max,
-            controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, scale, numba.get_num_threads(),
-            out["peak_velocity"], out["peak_time"], out["status"], out["energy_error"], out["n_steps"], out["t_end"],
-            out["sum_v"], out["sum_v2"], out["n_valid"],
+            self.kernel_id, self.kernel_params(), masses, stiffness, n, power_code(n), initial_velocity, observed, contacts,
+            t_max, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, scale, numba.get_num_threads(),
+            out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
+            out["status"], out["energy_error"], out["n_steps"], out["t_end"], out["sum_v"], out["sum_v2"], out["sum_wall"],
+            out["n_valid"],
         )
 
 
@@ -264,14 +276,14 @@ class DOP853(Integrator):
         object.__setattr__(self, "atol", atol)
 
     def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
-        status, info, peak_v, peak_t, grid_v, xf, vf = dop853_integrate(
+        status, info, peak_v, peak_t, grid_v, xf, vf, peak_f, peak_ft, grid_f = dop853_integrate(
             chain.masses, chain.stiffness, chain.n, chain.observed, x.copy(), v.copy(),
             rtol=self.rtol, atol=self.atol, t_max=t_max, stop_at_exit=stop_at_exit,
             exit_margin=controls.exit_margin, max_steps=controls.max_steps, peak_rtol=controls.peak_rtol, t_grid=t_grid,
         )
         x[:] = xf
         v[:] = vf
-        return int(status), info, peak_v, peak_t, grid_v
+        return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f
 
 
 #: Registered integrators by name (the CLI's ``--integrator`` choices).

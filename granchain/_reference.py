@@ -4,8 +4,11 @@ Everything here is plain NumPy/SciPy, sharing no numerical code with the
 compiled kernels: the right-hand side of Eq. (motion_rescaled) is vectorised
 over the whole chain (no active window), steps are SciPy's DOP853 (order 8,
 its own error norm and controller), peaks are roots of the acceleration on
-SciPy's order-7 dense output found with ``scipy.optimize.brentq``. Only the
-stopping rule is the same, so both integrators stop at the same physical event.
+SciPy's order-7 dense output found with ``scipy.optimize.brentq``, and so are the
+compression maxima of every contact (roots of v_k - v_{k+1}; force c_k delta^(n-1)
+there). Only the stopping rule (and the tie rule of peaks) is the same, so both
+integrators stop at the same physical event. A wall (last mass infinite) needs no
+special code beyond that rule: its acceleration F / inf is 0.
 """
 
 from __future__ import annotations
@@ -56,7 +59,9 @@ def _first_nonpositive(f, t0, t1):
 
 
 def _pulse_has_left(x, v, m) -> bool:
-    """Same rule as granchain._kernels._common.pulse_has_left."""
+    """Same rule as granchain._kernels._common.pulse_is_out (wall_released with a wall, else pulse_has_left)."""
+    if np.isinf(m[-1]):  # a wall: its contact open and the granule next to it moving away
+        return bool(x[-2] - x[-1] <= 0.0 and v[-2] < 0.0)
     if x[-2] - x[-1] > 0.0:
         return False
     heavy = m[:-1] >= RATTLER_MASS_RATIO * m[-1]
@@ -64,9 +69,10 @@ def _pulse_has_left(x, v, m) -> bool:
 
 
 def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid):
-    """Same contract as the compiled kernels; returns (status, info, peak_v, peak_t, grid_v, x, v)."""
+    """Same contract as the compiled kernels; returns (status, info, peak_v, peak_t, grid_v, x, v, peak_f, peak_ft, grid_f)."""
     M = masses.size
-    rhs, _ = chain_rhs(masses, stiffness, n)
+    rhs, forces = chain_rhs(masses, stiffness, n)
+    wall = bool(np.isinf(masses[-1]))
     y0 = np.concatenate((x0, v0))
     solver = _SciPyDOP853(rhs, 0.0, y0, t_bound=t_max, rtol=rtol, atol=atol)
     accel = lambda y: rhs(0.0, y)[M:]  # noqa: E731
@@ -75,8 +81,14 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     grid_v = np.zeros((t_grid.size, obs.size))  # time-major, as the kernels
     g = int(np.searchsorted(t_grid, 0.0, side="right"))
     grid_v[:g] = v0[obs]
+    peak_f = np.zeros(M - 1)
+    peak_ft = np.zeros(M - 1)
+    grid_f = np.zeros(t_grid.size)
+    if wall:
+        grid_f[:g] = forces(x0)[-1]
     t_needed = t_grid[-1] if t_grid.size else 0.0
     a_old = accel(y0)
+    v_old = v0.astype(float)
     exit_since = -1.0
     n_steps = 0
     status = None
@@ -102,11 +114,28 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
                 vp = dense(tp)[M + k]
                 if vp > peak_v[q] + peak_rtol * abs(peak_v[q]):  # same tie rule as the kernels
                     peak_v[q], peak_t[q] = vp, tp
+        w_old, w_new = v_old[:-1] - v_old[1:], y[M:-1] - y[M + 1:]
+        for j in np.flatnonzero((w_old > 0.0) & (w_new <= 0.0)):  # compression maxima
+            def approach(s, j=j):  # relative velocity v_j - v_{j+1} on the dense output
+                z = dense(s)
+                return z[M + j] - z[M + j + 1]
+
+            tp = _first_nonpositive(approach, t0, t1)
+            z = dense(tp)
+            d = z[j] - z[j + 1]
+            fp = stiffness[j] * d ** (n - 1.0) if d > 0.0 else 0.0
+            if fp > 0.0 and fp > peak_f[j] + peak_rtol * abs(peak_f[j]):
+                peak_f[j], peak_ft[j] = fp, tp
         g_end = int(np.searchsorted(t_grid, t1, side="right"))
         if g_end > g:
-            grid_v[g:g_end] = dense(t_grid[g:g_end])[M + obs].T
+            yg = dense(t_grid[g:g_end])
+            grid_v[g:g_end] = yg[M + obs].T
+            if wall:
+                d = yg[M - 2] - yg[M - 1]
+                grid_f[g:g_end] = np.where(d > 0.0, stiffness[-1] * np.abs(d) ** (n - 1.0), 0.0)
             g = g_end
         a_old = a_new
+        v_old = y[M:].copy()
         if stop_at_exit:
             if _pulse_has_left(y[:M], y[M:], masses):
                 if exit_since < 0.0:
@@ -127,5 +156,10 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     for q, k in enumerate(obs):
         if a_end[k] > 0.0 and solver.y[M + k] > peak_v[q] + peak_rtol * abs(peak_v[q]):  # as final_peaks
             peak_v[q], peak_t[q] = solver.y[M + k], solver.t
+    x_end, v_end = solver.y[:M], solver.y[M:]
+    f_end = forces(x_end)
+    for j in range(M - 1):  # as final_force_peaks
+        if v_end[j] - v_end[j + 1] > 0.0 and f_end[j] > 0.0 and f_end[j] > peak_f[j] + peak_rtol * abs(peak_f[j]):
+            peak_f[j], peak_ft[j] = f_end[j], solver.t
     info = np.array([solver.t, n_steps, 0.0, exit_since, solver.nfev], dtype=float)
-    return status, info, peak_v, peak_t, grid_v, solver.y[:M].copy(), solver.y[M:].copy()
+    return status, info, peak_v, peak_t, grid_v, solver.y[:M].copy(), solver.y[M:].copy(), peak_f, peak_ft, grid_f

@@ -24,6 +24,15 @@ class PulseResult:
     maximum of v_k(t) and its time, located between steps. ``energy_error`` is
     (E_end - E_0)/E_0, ``momentum_error`` (P_end - P_0)/P_0. ``velocity`` is
     (observed granule, time) on ``t_grid`` when a grid was requested.
+
+    ``peak_force``/``peak_force_time``: per contact j = 1..M-1 (between granules j and
+    j+1, 1-based), the maximum contact force c_j delta^(n-1) (Eq. motion_rescaled) and its
+    time, located between steps at the compression maximum (0 at t = 0 for a contact that
+    never closed). With a wall (``chain.wall``) the last contact is the wall's:
+    ``peak_wall_force``/``peak_wall_force_time`` repeat it, ``wall_force`` is the wall force
+    on ``t_grid`` (when a grid was requested), and ``wall_impulse`` = P_0 - P_end is the
+    momentum the wall took (= the time integral of the wall force); momentum is then not
+    conserved and ``momentum_error`` is NaN. Without a wall these are None.
     """
 
     chain: Chain
@@ -43,6 +52,12 @@ class PulseResult:
     velocity: np.ndarray | None
     positions: np.ndarray
     velocities: np.ndarray
+    peak_force: np.ndarray | None = None
+    peak_force_time: np.ndarray | None = None
+    wall_force: np.ndarray | None = None
+    peak_wall_force: float | None = None
+    peak_wall_force_time: float | None = None
+    wall_impulse: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -65,7 +80,9 @@ class PulseResult:
         lines.append(
             f"# {self.chain.kind} chain, M = {self.chain.size}, n = {self.chain.n:g}, integrator {self.integrator}: "
             f"{self.status.name} ({self.message}); t_end = {self.t_end:.4g}, steps = {self.n_steps} "
-            f"(+{self.n_rejected} rejected), energy error {self.energy_error:.2e}, momentum error {self.momentum_error:.2e}"
+            f"(+{self.n_rejected} rejected), energy error {self.energy_error:.2e}, "
+            + (f"momentum error {self.momentum_error:.2e}" if not self.chain.wall else
+               f"wall: peak force {self.peak_wall_force:.9g} at t = {self.peak_wall_force_time:.6f}, impulse {self.wall_impulse:.9g}")
         )
         return "\n".join(lines)
 
@@ -88,6 +105,20 @@ class PulseResult:
         if self.velocity is not None:
             ds["velocity"] = (("granule", "time"), self.velocity, {"units": "V_1 (rescaled)", "long_name": "velocity"})
             ds = ds.assign_coords(time=("time", self.t_grid, {"units": "rescaled time"}))
+        if self.peak_force is not None:
+            force_units = "M_1 L / T^2 (rescaled force, paper Eq. motion_rescaled)"
+            ds["peak_force"] = ("contact", self.peak_force, {"units": force_units, "long_name": "maximum contact force c delta^(n-1)"})
+            ds["peak_force_time"] = ("contact", self.peak_force_time, {"units": "rescaled time (paper Sec. II)",
+                                                                       "long_name": "time of the maximum contact force"})
+            last = "; the last is the wall contact" if self.chain.wall else ""
+            ds = ds.assign_coords(contact=("contact", np.arange(1, self.peak_force.size + 1),
+                                           {"long_name": f"contact j between granules j and j+1 (1-based){last}"}))
+        if self.chain.wall:
+            ds.attrs.update(peak_wall_force=self.peak_wall_force, peak_wall_force_time=self.peak_wall_force_time,
+                            wall_impulse=self.wall_impulse)
+            if self.wall_force is not None:
+                ds["wall_force"] = ("time", self.wall_force, {"units": "M_1 L / T^2 (rescaled force, paper Eq. motion_rescaled)",
+                                                              "long_name": "force on the wall"})
         return ds
 
 
@@ -121,8 +152,10 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     stop : "exit" or "t_max"
         "exit" (default) stops ``exit_margin`` time units after the pulse has
         left the last granule (last contact open and the last granule faster
-        than every other one), and not before ``t_grid[-1]``; "t_max"
-        integrates to exactly ``t_max``.
+        than every other one) or, for a chain ending in a wall, after the pulse
+        has come back from the wall (wall contact open and the granule next to it
+        moving away, without a break for ``exit_margin``), and not before
+        ``t_grid[-1]``; "t_max" integrates to exactly ``t_max``.
     peak_rtol : float
         Tie rule for the peak: a later local maximum replaces the recorded one
         only if higher by more than this relative amount (keep it above the
@@ -145,7 +178,7 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     x = np.zeros(chain.size)
     v = np.zeros(chain.size)
     v[0] = chain.initial_velocity
-    status, info, peak_v, peak_t, grid_v = integ.integrate(
+    status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = integ.integrate(
         chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit"), controls=controls
     )
     if status != Status.SUCCESS:
@@ -156,6 +189,7 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     e0, p0 = chain.energy, chain.momentum
     e1 = total_energy(x, v, chain.masses, chain.stiffness, chain.n)
     p1 = total_momentum(v, chain.masses)
+    wall = chain.wall
     return PulseResult(
         chain=chain,
         integrator=integ.name,
@@ -166,7 +200,7 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         t_end=float(info[INFO_T_END]),
         exit_time=float(info[INFO_EXIT]),
         energy_error=float((e1 - e0) / e0),
-        momentum_error=float((p1 - p0) / p0),
+        momentum_error=float("nan") if wall else float((p1 - p0) / p0),
         n_steps=int(info[INFO_STEPS]),
         n_rejected=int(info[INFO_REJECTED]),
         n_evaluations=int(info[INFO_EVALUATIONS]),
@@ -174,4 +208,10 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         velocity=np.ascontiguousarray(grid_v.T) if grid.size else None,
         positions=x,
         velocities=v,
+        peak_force=peak_f,
+        peak_force_time=peak_ft,
+        wall_force=grid_f if wall and grid.size else None,
+        peak_wall_force=float(peak_f[-1]) if wall else None,
+        peak_wall_force_time=float(peak_ft[-1]) if wall else None,
+        wall_impulse=float(p0 - p1) if wall else None,
     )

@@ -27,11 +27,12 @@ import numpy as np
 from ._status import NOT_COMPUTED, Status, describe_codes
 from ._version import __version__
 
-__all__ = ["Variable", "RESULTS", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "StoreRepairWarning", "stored_record",
-           "check_same_parameters", "checked_variables"]
+__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "StoreRepairWarning",
+           "stored_record", "check_same_parameters", "checked_variables", "result_variables", "per_realisation_variables"]
 
 UNITS_V = "V_1 (velocity of the struck granule; rescaled, paper Sec. II)"
 UNITS_T = "rescaled time (paper Sec. II)"
+UNITS_F = "M_1 L / T^2 (rescaled force, paper Eq. motion_rescaled; granchain.units converts to N)"
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,39 @@ RESULTS = (
     Variable("n_steps", ("chain", "realization"), "int64", -1, "1", "accepted integration steps"),
     Variable("t_end", ("chain", "realization"), "float64", np.nan, UNITS_T, "time the integration stopped"),
 )
+
+#: Peak contact forces per realisation. The ``contact`` dimension is the family's
+#: (:meth:`granchain.ChainFamily.contact_coordinate`), the same for every chain of the family:
+#: decorated families, contact q on the right of large granule q (decorated chain: large granule q
+#: and small granule q; effective chain: q and q+1); other families, every contact (q and q+1).
+FORCES = (
+    Variable("peak_force", ("chain", "realization", "contact"), "float64", np.nan, UNITS_F,
+             "maximum contact force c delta^(n-1) of contact q (decorated families: the contact on the right of "
+             "large granule q; other families: between granules q and q+1)"),
+    Variable("peak_force_time", ("chain", "realization", "contact"), "float64", np.nan, UNITS_T,
+             "time of the maximum force of contact q (the compression maximum)"),
+)
+
+#: Families with a rigid wall at the far end (``wall=True``): the wall contact's peak force.
+WALL = (
+    Variable("peak_wall_force", ("chain", "realization"), "float64", np.nan, UNITS_F,
+             "maximum force on the rigid wall at the far end of the chain"),
+    Variable("peak_wall_force_time", ("chain", "realization"), "float64", np.nan, UNITS_T,
+             "time of the maximum force on the wall"),
+)
+
+
+def result_variables(family) -> tuple:
+    """The per-realisation results a family's store holds: :data:`RESULTS`, :data:`FORCES`, and
+    :data:`WALL` when its chains end in a wall."""
+    return RESULTS + FORCES + (WALL if family.wall else ())
+
+
+def per_realisation_variables(family) -> tuple:
+    """Everything stored per realisation (dimension ``realization``): the family's random
+    parameters and its results. Written chunk by chunk, checksummed, filled, extended."""
+    return parameter_variables(family) + result_variables(family)
+
 
 #: The averaged pulse, computed from the exact fixed-point sums once every chunk is done.
 AVERAGED = (
@@ -98,13 +132,14 @@ def parameter_variables(family) -> tuple:
 
 def _sizes(spec) -> dict:
     return {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
-            "checked": len(checked_variables(spec)), **spec.family.dim_sizes()}
+            "checked": len(checked_variables(spec)), "contact": spec.family.n_contacts, **spec.family.dim_sizes()}
 
 
 def checked_variables(spec) -> list[str]:
-    """Every variable whose chunk values are checksummed: the family's parameters, :data:`RESULTS`
-    (read from the schema, so new results are checked automatically) and the progress sums."""
-    return [v.name for v in parameter_variables(spec.family) + RESULTS] + [f"progress/{name}" for name in PROGRESS_SUMS]
+    """Every variable whose chunk values are checksummed: the family's parameters and results
+    (:func:`per_realisation_variables`, read from the schema, so new results are checked
+    automatically) and the progress sums."""
+    return [v.name for v in per_realisation_variables(spec.family)] + [f"progress/{name}" for name in PROGRESS_SUMS]
 
 
 def digest(values, dtype) -> int:
@@ -188,10 +223,11 @@ def empty_dataset(spec, lazy: bool):
                         {"long_name": "realisation index i (random parameters from SeedSequence(seed, spawn_key=(i,)))"}),
         "granule": ("granule", np.asarray(granules), {"long_name": granule_name}),
         "time": ("time", np.asarray(spec.t_grid), {"units": UNITS_T, "long_name": "time"}),
+        "contact": ("contact", np.asarray(family.contact_coordinate()[0]), {"long_name": family.contact_coordinate()[1]}),
     }
     for dim, (values, long_name) in family.dims().items():
         coords[dim] = (dim, np.asarray(values), {"long_name": long_name})
-    variables = parameter_variables(family) + RESULTS + AVERAGED
+    variables = per_realisation_variables(family) + AVERAGED
     return xr.Dataset({v.name: var(v) for v in variables}, coords=coords, attrs=_attrs(spec))
 
 
@@ -216,7 +252,8 @@ def chunk_dataset(spec, res: dict):
     """The per-realisation variables of one finished chunk (the family's parameters and the results)."""
     import xarray as xr
 
-    out = {v.name: (v.dims, np.asarray(res[v.name]).astype(v.dtype, copy=False)) for v in parameter_variables(spec.family) + RESULTS}
+    out = {v.name: (v.dims, np.asarray(res[v.name]).astype(v.dtype, copy=False))
+           for v in per_realisation_variables(spec.family)}
     return xr.Dataset(out)
 
 
@@ -364,7 +401,7 @@ class ZarrSink:
         import zarr
 
         group = zarr.open_group(path, mode="r+", zarr_format=2, use_consolidated=False)
-        for v in parameter_variables(self.spec.family) + RESULTS:
+        for v in per_realisation_variables(self.spec.family):
             arr = zarr.open_array(store=path, path=v.name, mode="r+", zarr_format=2, config={"write_empty_chunks": True})
             region = _region(v.dims, "realization", sl)
             shape = tuple(s.stop - s.start if isinstance(s, slice) and s.stop is not None else n
@@ -495,7 +532,7 @@ class ZarrSink:
             self._mark_undone([last])
             start = old.chunk_slice(last).start
         group = zarr.open_group(self.path, mode="r+", zarr_format=2, use_consolidated=False)
-        for v in parameter_variables(spec.family) + RESULTS:
+        for v in per_realisation_variables(spec.family):
             arr = group[v.name]
             arr.resize(tuple(spec.realizations if d == "realization" else n for d, n in zip(v.dims, arr.shape)))
         group["realization"].resize((spec.realizations,))

@@ -17,7 +17,10 @@ size. A family says
 
 Families: :class:`RandomDecorated` (the paper's chain), :class:`TaperedDecorated`,
 :class:`RandomRadii` (polydisperse), :class:`BinaryRandom` (two species) and
-:class:`CustomFamily` (a user's function). Units are the paper's rescaled ones (Sec. II):
+:class:`CustomFamily` (a user's function). Every family but the custom one takes
+``wall=True``: its chains then end in a rigid wall (a last granule of infinite mass,
+:meth:`granchain.Chain.with_wall`), how protectors are tested; the free end is the
+default. Units are the paper's rescaled ones (Sec. II):
 radii in units of the reference (large) radius, masses R^3, the struck granule starts
 with velocity 1.
 """
@@ -33,7 +36,7 @@ from typing import Callable, ClassVar, NamedTuple
 
 import numpy as np
 
-from ._chain import HERTZ, Chain, decorated, from_radii, sphere_mass, sphere_stiffness
+from ._chain import HERTZ, Chain, decorated, from_radii, sphere_mass, sphere_stiffness, wall_stiffness
 from ._distributions import as_distribution, distribution_from_record, small_radius_distribution
 from ._effective import effective, effective_parameters
 from ._random import realization_rng
@@ -74,8 +77,10 @@ class RandomParameter:
 class ChainBatch(NamedTuple):
     """A batch of R chains of one size M, in the one chain representation.
 
-    masses (R, M), stiffness (R, M-1), initial_velocity (R,), observed (K,) 0-based
-    granule indices shared by every row, and the contact exponent n.
+    masses (R, M) (the last column inf for chains ending in a wall), stiffness (R, M-1),
+    initial_velocity (R,), observed (K,) 0-based granule indices shared by every row, the
+    contact exponent n, and ``contacts`` (C,): the 0-based contacts whose peak forces the
+    store records (the family's ``contact`` dimension; None: every contact but a wall's).
     """
 
     masses: np.ndarray
@@ -83,6 +88,25 @@ class ChainBatch(NamedTuple):
     initial_velocity: np.ndarray
     observed: np.ndarray
     n: float
+    contacts: np.ndarray | None = None
+
+    def recorded_contacts(self) -> np.ndarray:
+        """``contacts``, or every contact but the wall's."""
+        if self.contacts is not None:
+            return np.asarray(self.contacts, dtype=np.int64)
+        M = self.masses.shape[-1]
+        return np.arange(M - 1 - bool(np.isinf(self.masses[..., -1]).any()), dtype=np.int64)
+
+
+def _add_wall(batch: ChainBatch, last_radius) -> ChainBatch:
+    """The batch with a rigid wall after its last granule: mass inf, stiffness sqrt(2 R_M)
+    (:func:`granchain.wall_stiffness`, the limit of Eq. r-prime), the expressions of
+    :meth:`granchain.Chain.with_wall`, so that rows stay bitwise the single chains."""
+    R = batch.masses.shape[0]
+    masses = np.concatenate((batch.masses, np.full((R, 1), np.inf)), axis=1)
+    stiffness = np.concatenate((batch.stiffness, wall_stiffness(np.broadcast_to(last_radius, (R,)))[:, None]), axis=1)
+    contacts = batch.recorded_contacts()  # fixed before the wall is added: the wall's contact is stored apart
+    return batch._replace(masses=masses, stiffness=stiffness, contacts=contacts)
 
 
 class ChainFamily:
@@ -96,6 +120,7 @@ class ChainFamily:
 
     kind: ClassVar[str]
     n: float
+    wall: bool = False  # (a class default; the concrete families have a ``wall`` field)
 
     # -- what the family is -------------------------------------------------------------
     @property
@@ -116,6 +141,24 @@ class ChainFamily:
     def granule_coordinate(self) -> tuple:
         """(values, long_name) of the store's ``granule`` coordinate."""
         raise NotImplementedError
+
+    @property
+    def n_contacts(self) -> int:
+        """Contacts C whose peak forces the store records (its ``contact`` dimension), the same for
+        every chain of the family: every contact between granules (not a wall's) by default."""
+        return self.size - 1
+
+    def contact_coordinate(self) -> tuple:
+        """(values, long_name) of the store's ``contact`` coordinate."""
+        return np.arange(1, self.n_contacts + 1), "contact q between granules q and q+1 (1-based; every contact)"
+
+    def _walled(self, record: dict) -> dict:
+        """A :meth:`describe` record with ``"wall": True`` for a family with a wall (free-end records
+        stay as before, so stores written without the option resume unchanged)."""
+        return {**record, "wall": True} if self.wall else record
+
+    def _wall_label(self) -> str:
+        return ", against a rigid wall" if self.wall else ""
 
     def parameters(self) -> tuple:
         """The :class:`granchain.families.RandomParameter` records of what :meth:`draw` returns."""
@@ -185,6 +228,12 @@ class ChainFamily:
         return _grid(1.3 * t_arrival + 10.0, dt)
 
 
+def _flag(name: str, value) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
 def _grid(t_end: float, dt: float) -> np.ndarray:
     return np.round(np.arange(0.0, t_end + 0.5 * dt, dt), 12)
 
@@ -214,6 +263,7 @@ class _Decorated(ChainFamily):
         object.__setattr__(self, "distribution", dist)
         object.__setattr__(self, "n", exponent(self.n))
         object.__setattr__(self, "momentum_conserving", bool(self.momentum_conserving))
+        object.__setattr__(self, "wall", _flag("wall", self.wall))
 
     def large_radii(self) -> np.ndarray:
         raise NotImplementedError
@@ -257,6 +307,15 @@ class _Decorated(ChainFamily):
     def granule_coordinate(self) -> tuple:
         return np.arange(1, self.n_large + 1), "large-granule index k (decorated index 2k-1)"
 
+    @property
+    def n_contacts(self) -> int:
+        return self.n_large - 1
+
+    def contact_coordinate(self) -> tuple:
+        return (np.arange(1, self.n_large),
+                "contact q on the right of large granule q: decorated chain, between large granule q and small granule q "
+                "(decorated indices 2q-1, 2q); effective chain, between granules q and q+1")
+
     def parameters(self) -> tuple:
         return (RandomParameter("small_radius", ("gap",), "float64", _RADIUS_UNITS.replace("reference", "large-granule"),
                                 "radius of the small granule between large granules j and j+1"),)
@@ -276,16 +335,19 @@ class _Decorated(ChainFamily):
             radii = np.empty((R, 2 * G + 1))
             radii[:, 0::2] = big
             radii[:, 1::2] = small
-            return ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(R), np.arange(0, 2 * G + 1, 2), self.n)
-        mu, c_eff = effective_parameters(big, small, self.n)  # Eqs. (renorm-mass), (effec-int)
-        # As granchain.effective: velocity 1, or m_1 v_1 / mu_1 (momentum-conserving).
-        v0 = sphere_mass(big[:, 0]) * 1.0 / mu[:, 0] if self.momentum_conserving else np.ones(R)
-        return ChainBatch(mu, c_eff, v0, np.arange(G + 1), self.n)
+            obs = np.arange(0, 2 * G + 1, 2)
+            batch = ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(R), obs, self.n, obs[:-1])
+        else:
+            mu, c_eff = effective_parameters(big, small, self.n)  # Eqs. (renorm-mass), (effec-int)
+            # As granchain.effective: velocity 1, or m_1 v_1 / mu_1 (momentum-conserving).
+            v0 = sphere_mass(big[:, 0]) * 1.0 / mu[:, 0] if self.momentum_conserving else np.ones(R)
+            batch = ChainBatch(mu, c_eff, v0, np.arange(G + 1), self.n, np.arange(G))
+        return _add_wall(batch, big[:, -1]) if self.wall else batch
 
     def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
         chain = self._chain_name(chain)
         small = self.draw(realization_rng(seed, realization))["small_radius"]
-        exact = decorated(small, large_radius=self.large_radii(), n=self.n)
+        exact = decorated(small, large_radius=self.large_radii(), n=self.n, wall=self.wall)
         return exact if chain == "decorated" else effective(exact, momentum_conserving=self.momentum_conserving)
 
 
@@ -304,6 +366,7 @@ class RandomDecorated(_Decorated):
     distribution: object = None
     n: float = HERTZ
     momentum_conserving: bool = False
+    wall: bool = False
 
     kind: ClassVar[str] = "decorated"
 
@@ -320,11 +383,11 @@ class RandomDecorated(_Decorated):
         return {"small_radius": self.distribution.sample(rng, self.n_large - 1)}
 
     def describe(self) -> dict:
-        return {"family": self.kind, "n_large": self.n_large, "distribution": self.distribution.describe(), "n": self.n,
-                "momentum_conserving": self.momentum_conserving}
+        return self._walled({"family": self.kind, "n_large": self.n_large, "distribution": self.distribution.describe(),
+                             "n": self.n, "momentum_conserving": self.momentum_conserving})
 
     def label(self) -> str:
-        return f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}"
+        return f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}{self._wall_label()}"
 
     def arrival_ratio(self) -> float:
         return 1.0
@@ -347,6 +410,7 @@ class TaperedDecorated(_Decorated):
     distribution: object = None
     n: float = HERTZ
     momentum_conserving: bool = False
+    wall: bool = False
 
     kind: ClassVar[str] = "tapered-decorated"
 
@@ -362,11 +426,11 @@ class TaperedDecorated(_Decorated):
         return self.q ** np.arange(self.n_large, dtype=float)
 
     def describe(self) -> dict:
-        return {"family": self.kind, "n_large": self.n_large, "q": self.q, "distribution": self.distribution.describe(),
-                "n": self.n, "momentum_conserving": self.momentum_conserving}
+        return self._walled({"family": self.kind, "n_large": self.n_large, "q": self.q, "distribution": self.distribution.describe(),
+                             "n": self.n, "momentum_conserving": self.momentum_conserving})
 
     def label(self) -> str:
-        return f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}"
+        return f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}{self._wall_label()}"
 
 
 # ---------------------------------------------------------------------------- undecorated families
@@ -393,12 +457,13 @@ class _RadiiFamily(ChainFamily):
     def build(self, params: dict, chain: str) -> ChainBatch:
         self._chain_name(chain)
         radii = self.radii_of(params)
-        return ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(radii.shape[0]), np.arange(self.size), self.n)
+        batch = ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(radii.shape[0]), np.arange(self.size), self.n)
+        return _add_wall(batch, radii[:, -1]) if self.wall else batch
 
     def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
         self._chain_name(chain)
         params = {k: np.asarray(v)[None] for k, v in self.draw(realization_rng(seed, realization)).items()}
-        return from_radii(self.radii_of(params)[0], n=self.n, kind=self.kind)
+        return from_radii(self.radii_of(params)[0], n=self.n, kind=self.kind, wall=self.wall)
 
 
 @dataclass(frozen=True)
@@ -411,6 +476,7 @@ class RandomRadii(_RadiiFamily):
     size: int = 26
     distribution: object = None
     n: float = HERTZ
+    wall: bool = False
 
     kind: ClassVar[str] = "polydisperse"
 
@@ -420,6 +486,7 @@ class RandomRadii(_RadiiFamily):
             raise ValueError("RandomRadii needs a radius distribution, e.g. granchain.Uniform(0.8, 1.2)")
         object.__setattr__(self, "distribution", as_distribution(self.distribution))
         object.__setattr__(self, "n", exponent(self.n))
+        object.__setattr__(self, "wall", _flag("wall", self.wall))
 
     def parameters(self) -> tuple:
         return (RandomParameter("radius", ("granule",), "float64", _RADIUS_UNITS, "radius of the granule"),)
@@ -431,10 +498,10 @@ class RandomRadii(_RadiiFamily):
         return _stack(params, "radius")
 
     def describe(self) -> dict:
-        return {"family": self.kind, "size": self.size, "distribution": self.distribution.describe(), "n": self.n}
+        return self._walled({"family": self.kind, "size": self.size, "distribution": self.distribution.describe(), "n": self.n})
 
     def label(self) -> str:
-        return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}"
+        return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}{self._wall_label()}"
 
 
 @dataclass(frozen=True)
@@ -448,6 +515,7 @@ class BinaryRandom(_RadiiFamily):
     radii: tuple = (1.0, 0.5)
     p: float = 0.5
     n: float = HERTZ
+    wall: bool = False
 
     kind: ClassVar[str] = "binary"
 
@@ -463,6 +531,7 @@ class BinaryRandom(_RadiiFamily):
             raise ValueError(f"p = {p!r} is a probability (of species b): need 0 <= p <= 1")
         object.__setattr__(self, "p", p)
         object.__setattr__(self, "n", exponent(self.n))
+        object.__setattr__(self, "wall", _flag("wall", self.wall))
 
     def parameters(self) -> tuple:
         return (RandomParameter("species", ("granule",), "int8", "1", "species of the granule (0 = a, 1 = b)"),)
@@ -476,10 +545,10 @@ class BinaryRandom(_RadiiFamily):
         return np.where(species == 1, self.radii[1], self.radii[0]).astype(float)
 
     def describe(self) -> dict:
-        return {"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p, "n": self.n}
+        return self._walled({"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p, "n": self.n})
 
     def label(self) -> str:
-        return f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}"
+        return f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}{self._wall_label()}"
 
 
 # ---------------------------------------------------------------------------- a user's family
@@ -499,7 +568,9 @@ class CustomFamily(ChainFamily):
     Parameters
     ----------
     build : callable
-        ``build(rng) -> radii`` or ``build(rng) -> granchain.Chain``.
+        ``build(rng) -> radii`` or ``build(rng) -> granchain.Chain`` (a Chain may end in a wall,
+        e.g. ``granchain.from_radii(radii, wall=True)``; the store's ``contact`` dimension is then
+        every contact, the wall's last).
     name : str
         The chain's name in the store's ``chain`` coordinate.
     observed : sequence of int, optional
@@ -558,6 +629,11 @@ class CustomFamily(ChainFamily):
     def n_observed(self) -> int:
         return self._probe.observed.size
 
+    @property
+    def wall(self) -> bool:
+        """Whether the chains end in a wall (a build returning a Chain that ends in one)."""
+        return self._probe.wall
+
     def granule_coordinate(self) -> tuple:
         return self._probe.observed + 1, "observed granule (1-based index in the chain)"
 
@@ -587,10 +663,11 @@ class CustomFamily(ChainFamily):
         self._chain_name(chain)
         if not self.returns_chain:
             radii = _stack(params, "radius")
-            return ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(radii.shape[0]), self._probe.observed, self._probe.n)
+            return ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(radii.shape[0]), self._probe.observed, self._probe.n,
+                              np.arange(self.size - 1))
         masses, stiffness = _stack(params, "mass"), _stack(params, "stiffness")
         return ChainBatch(masses, stiffness, np.atleast_1d(np.asarray(params["initial_velocity"], dtype=float)),
-                          self._probe.observed, self._probe.n)
+                          self._probe.observed, self._probe.n, np.arange(self.size - 1))
 
     def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
         self._chain_name(chain)
@@ -622,16 +699,17 @@ def family_from_record(record: dict) -> ChainFamily:
     kind = record.pop("family", None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # warned about when the ensemble was made
+        wall = bool(record.get("wall", False))
         if kind == RandomDecorated.kind:
             return RandomDecorated(record["n_large"], distribution_from_record(record["distribution"]), n=record["n"],
-                                   momentum_conserving=record["momentum_conserving"])
+                                   momentum_conserving=record["momentum_conserving"], wall=wall)
         if kind == TaperedDecorated.kind:
             return TaperedDecorated(record["n_large"], record["q"], distribution_from_record(record["distribution"]),
-                                    n=record["n"], momentum_conserving=record["momentum_conserving"])
+                                    n=record["n"], momentum_conserving=record["momentum_conserving"], wall=wall)
         if kind == RandomRadii.kind:
-            return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"])
+            return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"], wall=wall)
         if kind == BinaryRandom.kind:
-            return BinaryRandom(record["size"], tuple(record["radii"]), record["p"], n=record["n"])
+            return BinaryRandom(record["size"], tuple(record["radii"]), record["p"], n=record["n"], wall=wall)
     if kind == CustomFamily.kind:
         raise ValueError(f"a CustomFamily ({record.get('build')}) cannot be rebuilt from its record: pass the family itself")
     raise ValueError(f"unknown chain family {kind!r}; known: {sorted(FAMILIES)}")

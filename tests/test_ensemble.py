@@ -80,7 +80,8 @@ def local():
 
 # -- 1. the split of the work changes nothing -------------------------------------------------
 def test_reference_run_is_complete(local):
-    assert local.sizes == {"chain": 2, "realization": R, "granule": N, "gap": N - 1, "time": gc.default_time_grid(N).size}
+    assert local.sizes == {"chain": 2, "realization": R, "granule": N, "gap": N - 1, "contact": N - 1,
+                           "time": gc.default_time_grid(N).size}
     assert list(local["chain"].values) == ["decorated", "effective"]
     assert np.all(local["status"].values == gc.Status.SUCCESS)
     np.testing.assert_array_equal(local["n_valid"].values, [R, R])

@@ -161,9 +161,11 @@ def test_pulse_to_physical_keeps_result():
     np.testing.assert_allclose(phys.peak_velocity, res.peak_velocity * 0.5, rtol=1e-15)
     np.testing.assert_allclose(phys.t_grid, np.linspace(0, 5, 11) * s.time, rtol=1e-15)
     np.testing.assert_allclose(phys.velocity, res.velocity * 0.5, rtol=1e-15)
-    assert phys.peak_force is None
+    # results record peak contact forces (per contact): converted with the force unit
+    np.testing.assert_allclose(phys.peak_force, res.peak_force * s.force, rtol=1e-15)
+    np.testing.assert_allclose(phys.peak_force_time, res.peak_force_time * s.time, rtol=1e-15)
     d = phys.as_dict()
-    assert set(d) >= {"peak_time_s", "peak_velocity_m_s", "t_end_s", "velocity_m_s"} and "peak_force_N" not in d
+    assert set(d) >= {"peak_time_s", "peak_velocity_m_s", "t_end_s", "velocity_m_s", "peak_force_N", "peak_force_time_s"}
 
 
 def test_pulse_with_forces_converts_forces():

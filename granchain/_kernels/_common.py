@@ -4,6 +4,16 @@ Equation of motion, paper Eq. (motion_rescaled):
     m_k x_k'' = c_{k-1} (x_{k-1} - x_k)^(n-1) theta(x_{k-1} - x_k)
               - c_k     (x_k - x_{k+1})^(n-1) theta(x_k - x_{k+1}).
 
+A rigid wall at the far end is a last granule of infinite mass (inverse mass 0,
+contact stiffness sqrt(2 R_M), the limit of Eq. r-prime): it never moves, and the
+same force routines serve it; only the stop rule (:func:`pulse_is_out`) and the
+energy and momentum sums (which skip it) know about it.
+
+Contact forces: the force c_k delta^(n-1) of contact k peaks where its
+compression delta = x_k - x_{k+1} does, i.e. where the relative velocity
+v_k - v_{k+1} changes sign from + to - (the integrators locate that root between
+steps, as they locate the velocity peaks).
+
 The "window" ``hi``: granules hi..M-1 are exactly at rest and uncompressed, so
 only granules 0..hi-1 are integrated. A Runge-Kutta step spreads motion by at
 most a few granules per step (one per two stages), so the window is kept
@@ -88,11 +98,14 @@ def acceleration_of(x, k, c, inv_m, n, pw):
 
 @njit(**JIT)
 def total_energy(x, v, m, c, n):
-    """Kinetic plus potential energy, sum m v^2/2 + sum (c/n) delta^n (Eq. hertz-1)."""
+    """Kinetic plus potential energy, sum m v^2/2 + sum (c/n) delta^n (Eq. hertz-1).
+
+    A wall (infinite mass, at rest) has no kinetic energy; its contact's potential counts."""
     M = x.shape[0]
     e = 0.0
     for k in range(M):
-        e += 0.5 * m[k] * v[k] * v[k]
+        if m[k] < math.inf:
+            e += 0.5 * m[k] * v[k] * v[k]
     for j in range(M - 1):
         d = x[j] - x[j + 1]
         if d > 0.0:
@@ -102,9 +115,11 @@ def total_energy(x, v, m, c, n):
 
 @njit(**JIT)
 def total_momentum(v, m):
+    """sum m v over the granules (a wall, of infinite mass, is left out: it takes the impulse)."""
     p = 0.0
     for k in range(v.shape[0]):
-        p += m[k] * v[k]
+        if m[k] < math.inf:
+            p += m[k] * v[k]
     return p
 
 
@@ -160,14 +175,39 @@ def pulse_has_left(x, v, m):
 
 
 @njit(**JIT)
+def has_wall(m):
+    """The last granule is a rigid wall (infinite mass)."""
+    return m[m.shape[0] - 1] == math.inf
+
+
+@njit(**JIT)
+def wall_released(x, v):
+    """The pulse has come back from the wall: the wall contact is open and the granule
+    next to the wall moves away from it (v < 0). The run ends ``exit_margin`` after this
+    has held without a break (it resets if the granule is pushed back), so "for good"
+    means: for at least exit_margin."""
+    M = x.shape[0]
+    return x[M - 2] - x[M - 1] <= 0.0 and v[M - 2] < 0.0
+
+
+@njit(**JIT)
+def pulse_is_out(x, v, m):
+    """The stop condition: :func:`wall_released` with a wall, else :func:`pulse_has_left`."""
+    if has_wall(m):
+        return wall_released(x, v)
+    return pulse_has_left(x, v, m)
+
+
+@njit(**JIT)
 def end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed):
     """Bookkeeping after an accepted step: (status, or -1 to go on; updated exit_since).
 
-    ``exit_since`` is the time since which the pulse has been out of the chain
-    (-1 while it is not); the run succeeds ``exit_margin`` later (not before t_needed).
+    ``exit_since`` is the time since which the pulse has been out of the chain, or
+    back from the wall (-1 while it is not); the run succeeds ``exit_margin`` later
+    (not before t_needed).
     """
     if stop_at_exit:
-        if hi == x.shape[0] and pulse_has_left(x, v, m):
+        if hi == x.shape[0] and pulse_is_out(x, v, m):
             if exit_since < 0.0:
                 exit_since = t
             if t >= max(exit_since + exit_margin, t_needed):
@@ -233,6 +273,18 @@ def final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t):
         if a[obs[q]] > 0.0 and is_new_peak(v[obs[q]], peak_v[q], peak_rtol):
             peak_v[q] = v[obs[q]]
             peak_t[q] = t
+
+
+@njit(**JIT)
+def final_force_peaks(x, v, c, n, pw, t, peak_rtol, peak_f, peak_ft):
+    """The force at the end of the run is a candidate for contacts still compressing
+    (delta > 0 and v_k - v_{k+1} > 0): their maximum lies beyond the run."""
+    for j in range(x.shape[0] - 1):
+        if v[j] - v[j + 1] > 0.0:
+            f = contact_force(x[j] - x[j + 1], c[j], n, pw)
+            if f > 0.0 and is_new_peak(f, peak_f[j], peak_rtol):
+                peak_f[j] = f
+                peak_ft[j] = t
 
 
 @njit(**JIT)

@@ -11,7 +11,11 @@ granules.
 Peaks of the observed granules are located between steps: a local maximum of
 v_k lies where its acceleration changes sign from + to -, and the root of the
 acceleration computed from the dense-output positions is found by the Illinois
-method, so peak times are not tied to the step grid.
+method, so peak times are not tied to the step grid. Peak contact forces the same
+way: contact j's compression peaks where the dense-output relative velocity
+v_j - v_{j+1} changes sign from + to - (checked only for contacts in the active
+window, and the root searched only when the step ends show a sign change); the
+force there is c_j delta^(n-1) of the dense-output positions.
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ from ._common import (
     initial_window,
     is_finite_window,
     end_of_step,
+    final_force_peaks,
+    has_wall,
     stop_time,
     write_info,
 )
@@ -69,6 +75,9 @@ P = np.array(
 )
 
 SAFETY = 0.9
+#: Contact-force screen: the root of a compression maximum is searched only if the Hermite
+#: estimate of that maximum reaches this fraction of the contact's recorded peak compression.
+SCREEN = 0.9
 BETA = 0.08  # PI controller: Gustafsson's value, few rejections when stability limits the step
 ALPHA = 0.2 - 0.75 * BETA
 MIN_FACTOR = 0.2
@@ -140,6 +149,56 @@ def _acceleration_root(k, a0, a1, x, Kx, h, c, inv_m, n, pw, Q):
     return hi
 
 
+@njit(**JIT)
+def _approach_root(j, w0, w1, v, Kv, h, Q):
+    """First theta in [0, 1] where the relative velocity v_j - v_{j+1} (dense output; + at 0,
+    <= 0 at 1) stops being positive: the compression maximum of contact j. Illinois, with
+    bisection when the bracket ends on an exact zero."""
+    lo, hi = 0.0, 1.0
+    f_lo, f_hi = w0, w1
+    side = 0
+    for _ in range(200):
+        if f_hi < 0.0:
+            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            if not (lo < theta < hi):
+                theta = 0.5 * (lo + hi)
+        else:
+            theta = 0.5 * (lo + hi)
+        dense_weights(theta, Q)
+        f = dense_value(v[j], Kv, j, h, Q) - dense_value(v[j + 1], Kv, j + 1, h, Q)
+        if f > 0.0:
+            lo, f_lo = theta, f
+            if side == -1:
+                f_hi *= 0.5
+            side = -1
+        else:
+            hi, f_hi = theta, f
+            if side == 1:
+                f_lo *= 0.5
+            side = 1
+        if hi - lo < 1e-14:
+            break
+    return hi
+
+
+@njit(**JIT)
+def hermite_max_estimate(d0, w0, d1, w1, h):
+    """The cubic Hermite interpolant of the compression through (d0, w0) and (d1, w1) over a step h,
+    at the zero of the linearly interpolated relative velocity w (w0 > 0 >= w1): an estimate of the
+    compression maximum, used only to skip hopeless root searches (:data:`SCREEN`)."""
+    theta = w0 / (w0 - w1)
+    t2 = theta * theta
+    t3 = t2 * theta
+    return (2 * t3 - 3 * t2 + 1) * d0 + (t3 - 2 * t2 + theta) * h * w0 + (-2 * t3 + 3 * t2) * d1 + (t3 - t2) * h * w1
+
+
+@njit(**JIT)
+def _contact_force_at(theta, j, x, Kx, h, c, n, pw, Q):
+    """c_j delta^(n-1) at t + theta h from the dense-output positions (Eq. motion_rescaled)."""
+    dense_weights(theta, Q)
+    return contact_force(dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q), c[j], n, pw)
+
+
 # Coefficients as scalars so that Numba folds them into the unrolled stages.
 A21 = A[1, 0]
 A31, A32 = A[2, 0], A[2, 1]
@@ -209,7 +268,7 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, rtol, atol, ratio):
 
 
 @njit(**JIT)
-def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, info):
+def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
     """Integrate one chain from the state (x, v) at t = 0.
 
     ``x``, ``v`` (length M) hold the initial state and receive the final one.
@@ -217,7 +276,11 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     maximum velocity ``peak_v[q]`` and its time ``peak_t[q]`` (see
     ``granchain._kernels._common.is_new_peak`` for ties), and the velocity
     at each time t_grid[g] into ``grid_v[g, q]`` (time-major: one
-    contiguous row per grid time). ``h_fixed > 0`` turns
+    contiguous row per grid time). For each contact j (0-based, M-1 of them) it
+    writes the maximum contact force ``peak_f[j]`` and its time ``peak_ft[j]`` (0 at
+    t = 0 for a contact that never closed; same tie rule as the velocities); with
+    a wall (m[M-1] = inf) ``grid_f[g]`` receives the wall force at t_grid[g]
+    (untouched otherwise). ``h_fixed > 0`` turns
     step control off (fixed steps of h_fixed). With ``stop_at_exit`` the run
     ends ``exit_margin`` after the pulse has left the last granule (and not
     before t_grid[-1]); otherwise at ``t_max``.
@@ -236,6 +299,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     F = np.zeros(M)
     Q = np.zeros(7)
     ratio = np.zeros(2 * M)
+    peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
 
     hi = initial_window(x, v)
     accelerations(x, c, inv_m, n, pw, hi, F, Kv[0])
@@ -246,6 +310,13 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
+    wall = has_wall(m)
+    for j in range(M - 1):
+        peak_f[j] = 0.0
+        peak_ft[j] = 0.0
+    for gg in range(g):
+        if wall:
+            grid_f[gg] = contact_force(x[M - 2] - x[M - 1], c[M - 2], n, pw)
 
     h = h_fixed if h_fixed > 0.0 else h_init
     err_old = 1e-4
@@ -296,11 +367,33 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
                 if is_new_peak(vp, peak_v[q], peak_rtol):
                     peak_v[q] = vp
                     peak_t[q] = t + theta * h
+        # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -.
+        # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
+        for j in range(hi - 1):
+            w0 = Kx[0, j] - Kx[0, j + 1]
+            w1 = Kx[6, j] - Kx[6, j + 1]
+            if (w0 > 0.0) & (w1 <= 0.0):
+                # Screen: the cubic Hermite estimate of the compression maximum from the step ends
+                # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
+                d0 = x[j] - x[j + 1]
+                d1 = xs[j] - xs[j + 1]
+                if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[j]:
+                    continue
+                theta = _approach_root(j, w0, w1, v, Kv, h, Q)
+                fp = _contact_force_at(theta, j, x, Kx, h, c, n, pw, Q)
+                if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
+                    peak_f[j] = fp
+                    peak_ft[j] = t + theta * h
+                    dense_weights(theta, Q)
+                    peak_d[j] = dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
         while g < n_grid and t_grid[g] <= t + h:
-            dense_weights((t_grid[g] - t) / h, Q)
+            theta = (t_grid[g] - t) / h
+            dense_weights(theta, Q)
             for q in range(n_obs):
                 k = obs[q]
                 grid_v[g, q] = dense_value(v[k], Kv, k, h, Q) if k < hi else 0.0
+            if wall:
+                grid_f[g] = _contact_force_at(theta, M - 2, x, Kx, h, c, n, pw, Q) if M - 2 < hi else 0.0
             g += 1
 
         for i in range(hi):
@@ -333,5 +426,6 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
             err_old = max(err, 1e-4)
 
     final_peaks(obs, v, Kv[0], t, peak_rtol, peak_v, peak_t)
+    final_force_peaks(x, v, c, n, pw, t, peak_rtol, peak_f, peak_ft)
     write_info(info, t, n_acc, n_rej, exit_since, n_eval)
     return status

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from ._common import INFO_SIZE, INFO_STEPS, INFO_T_END, SUCCESS, total_energy
+from ._common import INFO_SIZE, INFO_STEPS, INFO_T_END, SUCCESS, has_wall, total_energy
 from ._dispatch import integrate_chain
 from ._jit import JIT, JIT_PARALLEL
 
@@ -34,16 +34,41 @@ def accumulate_fixed_point(grid_v, scale, acc1, acc2):
                 acc2[g, q] += np.int64(np.rint(w * w * scale))
 
 
+@njit(**JIT)
+def accumulate_fixed_point_1d(grid_f, scale, acc):
+    """acc += round(f * scale) over a (T,) grid (the wall force)."""
+    for g in range(grid_f.shape[0]):
+        w = grid_f[g]
+        if w != 0.0:
+            acc[g] += np.int64(np.rint(w * scale))
+
+
+@njit(**JIT)
+def gather_forces(peak_f, peak_ft, contacts, wall, force_out, force_time_out, wall_out):
+    """The recorded contacts' peak forces (``contacts``: 0-based contact indices) and, with a wall,
+    the wall contact's (the chain's last) into ``wall_out`` = [peak, time]."""
+    for q in range(contacts.shape[0]):
+        force_out[q] = peak_f[contacts[q]]
+        force_time_out[q] = peak_ft[contacts[q]]
+    if wall:
+        last = peak_f.shape[0] - 1
+        wall_out[0] = peak_f[last]
+        wall_out[1] = peak_ft[last]
+
+
 @njit(**JIT_PARALLEL)
-def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, t_max, exit_margin, max_steps, peak_rtol,
-                    t_grid, scale, n_threads, peak_v, peak_t, status, energy_error, n_steps, t_end, sum_v, sum_v2, n_valid):
+def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, contacts, t_max, exit_margin, max_steps, peak_rtol,
+                    t_grid, scale, n_threads, peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps,
+                    t_end, sum_v, sum_v2, sum_wall, n_valid):
     """Integrate realisations r = 0..R-1 (rows of ``masses``/``stiffness``/``v_init``, shared ``obs``).
 
     ``kernel``/``params``: the integrator (see ``_dispatch``). Per realisation writes
     peak_v[r, :], peak_t[r, :], status[r], energy_error[r] ((E_end - E_0)/E_0),
-    n_steps[r], t_end[r]. Adds round(v * scale) and round(v^2 * scale) of every
+    n_steps[r], t_end[r], the peak forces of the contacts ``contacts`` (0-based) into peak_f[r, :],
+    peak_ft[r, :] and, for chains ending in a wall, the wall's peak force and time into
+    peak_wall[r, :] (untouched otherwise). Adds round(v * scale) and round(v^2 * scale) of every
     successful realisation's observed velocities on ``t_grid`` into sum_v / sum_v2
-    (int64, (T, K)) and counts them in n_valid[0]. ``n_threads`` must be
+    (int64, (T, K)), with a wall round(F_wall * scale) into sum_wall (T,), and counts them in n_valid[0]. ``n_threads`` must be
     numba.get_num_threads() (passed in: calling it here would stop Numba from caching).
     """
     R, M = masses.shape
@@ -51,6 +76,7 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, t_max
     T = t_grid.shape[0]
     acc1 = np.zeros((n_threads, T, K), dtype=np.int64)
     acc2 = np.zeros((n_threads, T, K), dtype=np.int64)
+    accw = np.zeros((n_threads, T), dtype=np.int64)
     cnt = np.zeros(n_threads, dtype=np.int64)
     for r in prange(R):
         tid = numba.get_thread_id()
@@ -60,9 +86,14 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, t_max
         v = np.zeros(M)
         v[0] = v_init[r]
         grid_v = np.zeros((T, K))
+        pf = np.zeros(M - 1)
+        pft = np.zeros(M - 1)
+        grid_f = np.zeros(T)
         info = np.zeros(INFO_SIZE)
         st = integrate_chain(kernel, params, m, c, n, pw, obs, t_max, True, exit_margin, max_steps, peak_rtol,
-                             t_grid, x, v, peak_v[r], peak_t[r], grid_v, info)
+                             t_grid, x, v, peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info)
+        wall = has_wall(m)
+        gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
         status[r] = st
         n_steps[r] = np.int64(info[INFO_STEPS])
         t_end[r] = info[INFO_T_END]
@@ -72,9 +103,12 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, t_max
         if st == SUCCESS:
             cnt[tid] += 1
             accumulate_fixed_point(grid_v, scale, acc1[tid], acc2[tid])
+            if wall:
+                accumulate_fixed_point_1d(grid_f, scale, accw[tid])
     for th in range(n_threads):
         n_valid[0] += cnt[th]
         for g in range(T):
             for q in range(K):
                 sum_v[g, q] += acc1[th, g, q]
                 sum_v2[g, q] += acc2[th, g, q]
+            sum_wall[g] += accw[th, g]

@@ -4,8 +4,11 @@ x_{n+1} = x_n + h v_n + h^2 a_n / 2,  v_{n+1} = v_n + h (a_n + a_{n+1}) / 2.
 
 Peaks are located between steps with the cubic Hermite interpolant of (v, a)
 at the step ends, the peak time from the zero of the linearly interpolated
-acceleration; grid samples use the same Hermite cubic. Both are accurate to the
-method's own second order.
+acceleration; grid samples use the same Hermite cubic. Peak contact forces: the
+compression maximum of contact j at the zero of the linearly interpolated relative
+velocity v_j - v_{j+1}, the force there from the cubic Hermite interpolant of the
+positions through (x, v) at the step ends. All are accurate to the method's own
+second order.
 """
 
 from __future__ import annotations
@@ -24,7 +27,10 @@ from ._common import (
     initial_window,
     is_finite_window,
     is_new_peak,
+    contact_force,
     end_of_step,
+    final_force_peaks,
+    has_wall,
     stop_time,
     write_info,
 )
@@ -42,7 +48,20 @@ def hermite_velocity(v0, a0, v1, a1, h, theta):
 
 
 @njit(**JIT)
-def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, info):
+def hermite_position(x0, v0, x1, v1, h, theta):
+    """Cubic Hermite interpolant of x through (x0, v0) and (x1, v1) at t + theta h."""
+    return hermite_velocity(x0, v0, x1, v1, h, theta)
+
+
+@njit(**JIT)
+def _hermite_force(j, x_old, v_old, x, v, h, theta, c, n, pw):
+    """Contact force of contact j at t + theta h from the Hermite positions (Eq. motion_rescaled)."""
+    d = hermite_position(x_old[j], v_old[j], x[j], v[j], h, theta) - hermite_position(x_old[j + 1], v_old[j + 1], x[j + 1], v[j + 1], h, theta)
+    return contact_force(d, c[j], n, pw)
+
+
+@njit(**JIT)
+def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
     """Fixed-step velocity Verlet; same contract as ``dp5_integrate`` (step h)."""
     M = m.shape[0]
     n_obs = obs.shape[0]
@@ -51,6 +70,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
     a = np.zeros(M)
     a_new = np.zeros(M)
     v_old = np.zeros(M)
+    x_old = np.zeros(M)
     F = np.zeros(M)
     hi = initial_window(x, v)
     accelerations(x, c, inv_m, n, pw, hi, F, a)
@@ -58,6 +78,13 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
+    wall = has_wall(m)
+    for j in range(M - 1):
+        peak_f[j] = 0.0
+        peak_ft[j] = 0.0
+    for gg in range(g):
+        if wall:
+            grid_f[gg] = contact_force(x[M - 2] - x[M - 1], c[M - 2], n, pw)
     exit_since = -1.0
     n_acc = 0
     status = -1
@@ -73,6 +100,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             last = True
         for i in range(hi):
             v_old[i] = v[i]
+            x_old[i] = x[i]
             x[i] += dt * v[i] + 0.5 * dt * dt * a[i]
         accelerations(x, c, inv_m, n, pw, hi, F, a_new)
         n_eval += 1
@@ -88,11 +116,22 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
                 if is_new_peak(vp, peak_v[q], peak_rtol):
                     peak_v[q] = vp
                     peak_t[q] = t + theta * dt
+        for j in range(hi - 1):
+            w0 = v_old[j] - v_old[j + 1]
+            w1 = v[j] - v[j + 1]
+            if (w0 > 0.0) & (w1 <= 0.0):
+                theta = w0 / (w0 - w1)
+                fp = _hermite_force(j, x_old, v_old, x, v, dt, theta, c, n, pw)
+                if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
+                    peak_f[j] = fp
+                    peak_ft[j] = t + theta * dt
         while g < n_grid and t_grid[g] <= t + dt:
             theta = (t_grid[g] - t) / dt
             for q in range(n_obs):
                 k = obs[q]
                 grid_v[g, q] = hermite_velocity(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
+            if wall:
+                grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, n, pw) if M - 2 < hi else 0.0
             g += 1
         for i in range(hi):
             a[i] = a_new[i]
@@ -110,5 +149,6 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
         if status >= 0:
             break
     final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t)
+    final_force_peaks(x, v, c, n, pw, t, peak_rtol, peak_f, peak_ft)
     write_info(info, t, n_acc, 0, exit_since, n_eval)
     return status

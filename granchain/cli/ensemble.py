@@ -46,6 +46,9 @@ def add_parser(subparsers) -> None:
     fam.add_argument("--n", type=float, default=2.5, help="contact exponent (default 2.5, Hertz)")
     fam.add_argument("--momentum-conserving", action="store_true",
                      help="decorated families: the effective chain starts with m_1/mu_1 instead of velocity 1")
+    fam.add_argument("--wall", action="store_true",
+                     help="end every chain in a rigid wall (a granule of infinite radius and mass): stores the wall's "
+                          "peak force and its time per realisation (peak_wall_force, peak_wall_force_time)")
     p.add_argument("--chain", default="both", help="which chains: decorated, effective or both (decorated families; default both)")
     p.add_argument("--realizations", type=int, default=1000, help="number of random chains (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random parameters (default 0)")
@@ -65,6 +68,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")
     p.add_argument("--threads", type=int, default=None, help="Numba threads for a local run (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress output: only errors, warnings about the store and the final one-line result")
+    from ._units import add_unit_arguments
+
+    add_unit_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -118,13 +124,13 @@ def build_family(args):
     if args.family == "binary":
         if args.alpha is not None or args.beta is not None:
             raise ValueError("--alpha/--beta do not apply to --family binary (it takes --radii RA,RB and --p)")
-        return BinaryRandom(args.size, _pair(args.radii), args.p, n=args.n)
+        return BinaryRandom(args.size, _pair(args.radii), args.p, n=args.n, wall=args.wall)
     dist = Uniform(lo if args.alpha is None else args.alpha, hi if args.beta is None else args.beta)
     if args.family == "polydisperse":
-        return RandomRadii(args.size, dist, n=args.n)
+        return RandomRadii(args.size, dist, n=args.n, wall=args.wall)
     if args.family == "tapered-decorated":
-        return TaperedDecorated(args.large, args.q, dist, n=args.n, momentum_conserving=args.momentum_conserving)
-    return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving)
+        return TaperedDecorated(args.large, args.q, dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall)
+    return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall)
 
 
 def build_integrator(args):
@@ -145,12 +151,38 @@ def build_integrator(args):
     return cls(**{**base, **{k: v for k, v in given.items() if v is not None}})
 
 
+def _store_scale(path, scale) -> None:
+    """Record the physical scale in the store's attributes (``physical_*``, as
+    granchain.units.dataset_to_physical names them); the rescaled data are unchanged."""
+    import zarr
+
+    group = zarr.open_group(path, mode="r+")
+    group.attrs.update({f"physical_{k}": v for k, v in scale.as_dict().items()})
+    zarr.consolidate_metadata(path)
+
+
+def _physical_summary(ds, scale) -> str:
+    """Mean (over successful realisations) of the largest contact force and of the wall's peak force, in N."""
+    ok = ds["status"] == 0
+    parts = []
+    for chain in ds["chain"].values:
+        sel = ds.sel(chain=chain).where(ok.sel(chain=chain))
+        text = f"{chain}: largest contact force {float(sel['peak_force'].max('contact').mean()) * scale.force:.6g} N"
+        if "peak_wall_force" in ds:
+            text += (f", peak wall force {float(sel['peak_wall_force'].mean()) * scale.force:.6g} N"
+                     f" at {float(sel['peak_wall_force_time'].mean()) * scale.time:.4g} s")
+        parts.append(text + " (means over realisations)")
+    return "physical units (" + str(scale).split(":")[0] + "): " + "; ".join(parts)
+
+
 def run(args) -> int:
     import numpy as np
 
     from .._ensemble import run_ensemble
+    from ._units import scale_from_args
 
     check_arguments(args)
+    units = scale_from_args(args)  # None without unit options; checked before integrating
     family = build_family(args)
     grid = family.default_time_grid(args.dt)
     if args.t_end is not None:
@@ -179,4 +211,8 @@ def run(args) -> int:
     print(f"wrote {args.out}: {family.label()}; {ds.sizes['realization']} realisations x {ds.sizes['chain']} chains "
           f"({', '.join(ds['chain'].values)}), {ds.sizes['granule']} observed granules, integrator "
           f"{integrator.name}; failed integrations: {failed}")
+    if units is not None:
+        _store_scale(args.out, units)
+        print(_physical_summary(ds, units))
+        print(f"the store's attributes physical_* hold the scale; granchain.units.dataset_to_physical(ds, scale) adds SI variables")
     return 0

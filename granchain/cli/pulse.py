@@ -34,14 +34,21 @@ def add_parser(subparsers) -> None:
     chain.add_argument("--radii", metavar="R1,R2,...", help="any chain of spheres from its radii; all granules observed")
     p.add_argument("--effective", action="store_true", help="with --small-radii: integrate the effective (undecorated) chain instead")
     p.add_argument("--momentum-conserving", action="store_true", help="with --effective: start granule 1 with m_1/mu_1 instead of velocity 1")
+    p.add_argument("--wall", action="store_true", help=(
+        "end the chain in a rigid wall (a granule of infinite radius and mass, contact stiffness sqrt(2 R_M)); "
+        "the run stops once the pulse has come back from the wall, and the wall's peak force and impulse are printed"))
+    p.add_argument("--forces", action="store_true", help=(
+        'also print the peak force of every contact j (between granules j and j+1) and its time '
+        '(--json: "peak_force", "peak_force_time"); printed anyway, in N and s too, with physical units'))
     p.add_argument("--n", type=float, default=2.5, help="exponent of the contact potential (default: Hertz, 2.5)")
     p.add_argument("--integrator", default="dp5", help="dp5 (default), verlet or dop853 (SciPy reference)")
     p.add_argument("--rtol", type=float, help="relative tolerance (dp5, dop853)")
     p.add_argument("--atol", type=float, help="absolute tolerance (dp5, dop853)")
     p.add_argument("--dt", type=float, help="time step (verlet)")
     p.add_argument("--json", action="store_true", help=(
-        'print {"granule": [...], "peak_velocity": [...], "peak_time": [...]} only (rescaled); with physical units '
-        'also "physical": {"peak_velocity_m_s", "peak_time_s", ..., "scale": {...}}'))
+        'print {"granule": [...], "peak_velocity": [...], "peak_time": [...]} only (rescaled); with --wall also "wall": '
+        '{"peak_force", "peak_force_time", "impulse"}; with physical units also "physical": {"peak_velocity_m_s", '
+        '"peak_time_s", "peak_force_N", ..., "scale": {...}}'))
     add_unit_arguments(p)
     p.set_defaults(func=run)
 
@@ -67,6 +74,31 @@ def _physical_table(phys, labels) -> str:
     return "\n".join(lines)
 
 
+def _force_table(result, scale=None) -> str:
+    """Peak force and its time per contact j (between granules j and j+1, 1-based), rescaled and, with
+    a scale, in N and s (granchain.units: force unit M_1 L / T^2)."""
+    head = f"{'contact':>8} {'peak_force':>15} {'peak_force_time':>16}"
+    if scale is not None:
+        head += f" {'peak_force [N]':>15} {'time [s]':>13}"
+    lines = [head]
+    last = result.peak_force.size
+    for j, (f, t) in enumerate(zip(result.peak_force, result.peak_force_time), start=1):
+        row = f"{j:8d} {f:15.9g} {t:16.6f}"
+        if scale is not None:
+            row += f" {f * scale.force:15.9g} {t * scale.time:13.6e}"
+        lines.append(row + ("  (wall)" if result.chain.wall and j == last else ""))
+    return "\n".join(lines)
+
+
+def _wall_summary(result, scale=None) -> str:
+    text = (f"# wall: peak force {result.peak_wall_force:.9g} at t = {result.peak_wall_force_time:.6f}, "
+            f"impulse {result.wall_impulse:.9g} (rescaled)")
+    if scale is not None:
+        text += (f"; {result.peak_wall_force * scale.force:.6g} N at {result.peak_wall_force_time * scale.time:.6e} s, "
+                 f"impulse {result.wall_impulse * scale.mass * scale.velocity:.6g} N s")
+    return text
+
+
 def run(args) -> int:
     import granchain as gc
 
@@ -74,13 +106,13 @@ def run(args) -> int:
         raise ValueError("--momentum-conserving applies only to the effective chain: add --effective (with --small-radii)")
     units = scale_from_args(args)  # None without unit options; checked before integrating
     if args.small_radii is not None:
-        chain = gc.decorated(_floats(args.small_radii, "--small-radii"), n=args.n)
+        chain = gc.decorated(_floats(args.small_radii, "--small-radii"), n=args.n, wall=args.wall)
         if args.effective:
             chain = gc.effective(chain, momentum_conserving=args.momentum_conserving)
     else:
         if args.effective:
             raise ValueError("--effective needs --small-radii (a decorated chain)")
-        chain = gc.from_radii(_floats(args.radii, "--radii"), n=args.n)
+        chain = gc.from_radii(_floats(args.radii, "--radii"), n=args.n, wall=args.wall)
     result = gc.simulate(chain, _integrator(args))
     # Decorated (and effective) chains are reported by large-granule index k = 1..N
     # (decorated chain index 2k - 1); a chain from --radii by its own index.
@@ -92,8 +124,19 @@ def run(args) -> int:
             "peak_velocity": [float(v) for v in result.peak_velocity],
             "peak_time": [float(t) for t in result.peak_time],
         }
+        if args.forces:
+            out["peak_force"] = [float(f) for f in result.peak_force]
+            out["peak_force_time"] = [float(t) for t in result.peak_force_time]
+        if chain.wall:
+            out["wall"] = {"peak_force": result.peak_wall_force, "peak_force_time": result.peak_wall_force_time,
+                           "impulse": result.wall_impulse}
         if phys is not None:
-            out["physical"] = {**phys.as_dict(), "scale": units.as_dict()}
+            physical = phys.as_dict()  # with peak_force_N, peak_force_time_s per contact
+            if chain.wall:
+                physical["peak_wall_force_N"] = result.peak_wall_force * units.force
+                physical["peak_wall_force_time_s"] = result.peak_wall_force_time * units.time
+                physical["wall_impulse_N_s"] = result.wall_impulse * units.mass * units.velocity
+            out["physical"] = {**physical, "scale": units.as_dict()}
         print(json.dumps(out))
     else:
         print(result.table(labels))
@@ -101,6 +144,10 @@ def run(args) -> int:
             print("# granule = large-granule index k (decorated chain index 2k - 1)")
         if phys is not None:
             print(_physical_table(phys, labels))
+        if args.forces or units is not None:  # physical units: the peak forces in N too
+            print(_force_table(result, units))
+        if chain.wall and units is not None:
+            print(_wall_summary(result, units))
     if not result.ok:
         print(f"warning: {result.status.name}: {result.message}", file=sys.stderr)
         return 1
