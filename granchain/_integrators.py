@@ -135,7 +135,12 @@ class _Compiled(Integrator):
     def kernel_params(self) -> np.ndarray:
         raise NotImplementedError
 
+    def check_chains(self, masses, stiffness, n, initial_velocity) -> None:
+        """Called with the chains (rows) before every integration: warn or refuse where the method
+        cannot work (e.g. a fixed step beyond its stability limit). Nothing by default."""
+
     def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
+        self.check_chains(chain.masses[None], chain.stiffness[None], chain.n, chain.initial_velocity)
         peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info = _outputs(chain.observed.size, t_grid.size, chain.size)
         status = integrate_chain(
             self.kernel_id, self.kernel_params(), chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.observed,
@@ -148,6 +153,7 @@ class _Compiled(Integrator):
                         controls: RunControls, scale: float, out: dict) -> None:
         import numba
 
+        self.check_chains(masses, stiffness, n, initial_velocity)
         integrate_batch(
             self.kernel_id, self.kernel_params(), masses, stiffness, n, power_code(n), initial_velocity, observed, contacts,
             t_max, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, scale, numba.get_num_threads(),
@@ -236,7 +242,8 @@ class Verlet(_Compiled):
     def kernel_params(self) -> np.ndarray:
         return np.array([self.dt])
 
-    def _check_stability(self, masses, stiffness, n, initial_velocity):
+    def check_chains(self, masses, stiffness, n, initial_velocity) -> None:
+        """Warn (:class:`VerletStabilityWarning`) where dt * omega_max > 2 (see the class docstring)."""
         import warnings
 
         omega = verlet_omega_max(masses, stiffness, n, initial_velocity)
@@ -247,16 +254,6 @@ class Verlet(_Compiled):
                 f"Verlet dt = {self.dt:g} is beyond its stability limit for {int(bad.sum())} of {bad.size} chain(s): "
                 f"dt * omega_max = {self.dt * worst:.3g} > 2 (omega_max <= {worst:.4g}); the results are not trustworthy. "
                 f"Use dt <= {2.0 / worst:.3g} or the adaptive DP5", VerletStabilityWarning, stacklevel=4)
-
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
-        self._check_stability(chain.masses[None], chain.stiffness[None], chain.n, chain.initial_velocity)
-        return super().integrate(chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=stop_at_exit, controls=controls)
-
-    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, *, t_grid, t_max, controls: RunControls,
-                        scale: float, out: dict) -> None:
-        self._check_stability(masses, stiffness, n, initial_velocity)
-        super().integrate_batch(masses, stiffness, n, initial_velocity, observed, t_grid=t_grid, t_max=t_max,
-                                controls=controls, scale=scale, out=out)
 
 
 @dataclass(frozen=True)
