@@ -26,7 +26,7 @@ import numpy as np
 from ._status import NOT_COMPUTED, Status, describe_codes
 from ._version import __version__
 
-__all__ = ["Variable", "RESULTS", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "stored_record"]
+__all__ = ["Variable", "RESULTS", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "MemorySink", "ZarrSink", "stored_record"]
 
 UNITS_V = "V_1 (velocity of the struck granule; rescaled, paper Sec. II)"
 UNITS_T = "rescaled time (paper Sec. II)"
@@ -69,6 +69,23 @@ AVERAGED = (
     Variable("n_valid", ("chain",), "int64", 0, "1", "successful realisations in mean_velocity"),
 )
 
+#: The aligned pulse (only in ensembles run with ``lags``): <v_k(t_k^peak + tau)> over successful
+#: realisations, each shifted by its own peak time at k (granchain._kernels._aligned).
+ALIGNED = (
+    Variable("aligned_velocity", ("chain", "granule", "lag"), "float64", np.nan, UNITS_V,
+             "aligned pulse <v_k(t_k^peak + tau)>: velocity of large granule k at lag tau after the realisation's own peak there"),
+    Variable("aligned_velocity_stderr", ("chain", "granule", "lag"), "float64", np.nan, UNITS_V,
+             "standard error of the aligned pulse"),
+)
+
+#: The aligned pulse's fixed-point sums per chunk, in the ``progress`` group (with ``lags`` only).
+PROGRESS_ALIGNED = (
+    Variable("sum_a", ("chunk", "chain", "granule", "lag"), "int64", 0, "2^-fixed_point_bits V_1",
+             "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau) * 2^bits)"),
+    Variable("sum_a2", ("chunk", "chain", "granule", "lag"), "int64", 0, "2^-fixed_point_bits V_1^2",
+             "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau)^2 * 2^bits)"),
+)
+
 #: The ``progress`` group: one storage chunk per run chunk.
 PROGRESS = (
     Variable("sum_v", ("chunk", "chain", "granule", "time"), "int64", 0, "2^-fixed_point_bits V_1",
@@ -96,8 +113,21 @@ def parameter_variables(family) -> tuple:
 
 
 def _sizes(spec) -> dict:
-    return {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
-            **spec.family.dim_sizes()}
+    sizes = {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
+             **spec.family.dim_sizes()}
+    if spec.lags is not None:
+        sizes["lag"] = spec.lags.size
+    return sizes
+
+
+def averaged_variables(spec) -> tuple:
+    """The averaged variables of a run: :data:`AVERAGED`, plus :data:`ALIGNED` when it has ``lags``."""
+    return AVERAGED + (ALIGNED if spec.lags is not None else ())
+
+
+def progress_variables(spec) -> tuple:
+    """The ``progress`` group's variables: :data:`PROGRESS`, plus :data:`PROGRESS_ALIGNED` with ``lags``."""
+    return PROGRESS + (PROGRESS_ALIGNED if spec.lags is not None else ())
 
 
 def _attrs(spec) -> dict:
@@ -169,7 +199,10 @@ def empty_dataset(spec, lazy: bool):
     }
     for dim, (values, long_name) in family.dims().items():
         coords[dim] = (dim, np.asarray(values), {"long_name": long_name})
-    variables = parameter_variables(family) + RESULTS + AVERAGED
+    if spec.lags is not None:
+        coords["lag"] = ("lag", np.asarray(spec.lags), {"units": UNITS_T,
+                                                        "long_name": "time tau after the realisation's own peak time at k"})
+    variables = parameter_variables(family) + RESULTS + averaged_variables(spec)
     return xr.Dataset({v.name: var(v) for v in variables}, coords=coords, attrs=_attrs(spec))
 
 
@@ -179,7 +212,7 @@ def progress_dataset(spec):
 
     sizes = _sizes(spec)
     data, encoding = {}, {}
-    for v in PROGRESS:
+    for v in progress_variables(spec):
         shape = tuple(sizes[d] for d in v.dims)
         data[v.name] = (v.dims, np.full(shape, v.fill, dtype=v.dtype), v.metadata())
         encoding[v.name] = {"chunks": (1,) + shape[1:]}
@@ -196,18 +229,25 @@ def chunk_dataset(spec, res: dict):
     return xr.Dataset(out)
 
 
-def finalize(ds, spec, sum_v, sum_v2, n_valid):
-    """mean_velocity and its standard error from the exact fixed-point sums."""
-    scale = 2.0**spec.fixed_point_bits
-    nv = n_valid.astype(float)[:, None, None]
+def mean_from_sums(sum_v, sum_v2, n_valid, bits: int):
+    """(mean, standard error) over the last axes from fixed-point sums (chain, ...) and counts (chain,)."""
+    scale = 2.0**bits
+    nv = n_valid.astype(float).reshape((-1,) + (1,) * (sum_v.ndim - 1))
     s1 = sum_v.astype(float) / scale
     s2 = sum_v2.astype(float) / scale
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = s1 / nv
         var = np.maximum(s2 - s1 * mean, 0.0) / (nv - 1.0)
         stderr = np.sqrt(var / nv)
-    ds["mean_velocity"].values = np.where(nv > 0, mean, np.nan)
-    ds["mean_velocity_stderr"].values = np.where(nv > 1, stderr, np.nan)
+    return np.where(nv > 0, mean, np.nan), np.where(nv > 1, stderr, np.nan)
+
+
+def finalize(ds, spec, sum_v, sum_v2, n_valid, sum_a=None, sum_a2=None):
+    """mean_velocity (and the aligned pulse, with ``lags``) and standard errors from the exact fixed-point sums."""
+    ds["mean_velocity"].values, ds["mean_velocity_stderr"].values = mean_from_sums(sum_v, sum_v2, n_valid, spec.fixed_point_bits)
+    if spec.lags is not None:
+        ds["aligned_velocity"].values, ds["aligned_velocity_stderr"].values = mean_from_sums(
+            sum_a, sum_a2, n_valid, spec.fixed_point_bits)
     ds["n_valid"].values = n_valid.astype(np.int64)
     return ds
 
@@ -222,6 +262,9 @@ class MemorySink:
         self.sum_v = np.zeros(shape, dtype=np.int64)
         self.sum_v2 = np.zeros(shape, dtype=np.int64)
         self.n_valid = np.zeros((spec.n_chunks, len(spec.chains)), dtype=np.int64)
+        if spec.lags is not None:
+            shape = (spec.n_chunks, len(spec.chains), spec.family.n_observed, spec.lags.size)
+            self.sum_a, self.sum_a2 = np.zeros(shape, dtype=np.int64), np.zeros(shape, dtype=np.int64)
 
     def pending(self) -> list[int]:
         return list(range(self.spec.n_chunks))
@@ -232,9 +275,12 @@ class MemorySink:
         for name, values in chunk_dataset(self.spec, res).data_vars.items():
             self.ds[name][{"realization": sl}] = values
         self.sum_v[j], self.sum_v2[j], self.n_valid[j] = res["sum_v"], res["sum_v2"], res["n_valid"][:, 0]
+        if self.spec.lags is not None:
+            self.sum_a[j], self.sum_a2[j] = res["sum_a"], res["sum_a2"]
 
     def finalize(self):
-        return finalize(self.ds, self.spec, self.sum_v.sum(0), self.sum_v2.sum(0), self.n_valid.sum(0))
+        aligned = (self.sum_a.sum(0), self.sum_a2.sum(0)) if self.spec.lags is not None else ()
+        return finalize(self.ds, self.spec, self.sum_v.sum(0), self.sum_v2.sum(0), self.n_valid.sum(0), *aligned)
 
 
 class ZarrSink:
@@ -277,6 +323,9 @@ class ZarrSink:
             "sum_v2": (("chunk", "chain", "granule", "time"), res["sum_v2"][None]),
             "n_valid": (("chunk", "chain"), res["n_valid"].T),
         })
+        if self.spec.lags is not None:
+            for name in ("sum_a", "sum_a2"):
+                sums[name] = (("chunk", "chain", "granule", "lag"), res[name][None])
         sums.to_zarr(self.path, group="progress", region=region, mode="r+", consolidated=False, **_zarr_format())
         # The flag last: a chunk counts as done only once all its data are on disk.
         xr.Dataset({"done": (("chunk",), np.ones(1, dtype=np.int8))}).to_zarr(
@@ -287,9 +336,13 @@ class ZarrSink:
 
         prog = self._progress().load()
         ds = xr.open_zarr(self.path).load()
-        ds = finalize(ds, self.spec, prog["sum_v"].values.sum(0), prog["sum_v2"].values.sum(0), prog["n_valid"].values.sum(0))
-        ds[[v.name for v in AVERAGED]].to_zarr(
-            self.path, region={"chain": slice(None), "granule": slice(None), "time": slice(None)}, mode="r+", **_zarr_format())
+        aligned = (prog["sum_a"].values.sum(0), prog["sum_a2"].values.sum(0)) if self.spec.lags is not None else ()
+        ds = finalize(ds, self.spec, prog["sum_v"].values.sum(0), prog["sum_v2"].values.sum(0), prog["n_valid"].values.sum(0),
+                      *aligned)
+        region = {"chain": slice(None), "granule": slice(None), "time": slice(None)}
+        if self.spec.lags is not None:
+            region["lag"] = slice(None)
+        ds[[v.name for v in averaged_variables(self.spec)]].to_zarr(self.path, region=region, mode="r+", **_zarr_format())
         return ds
 
 

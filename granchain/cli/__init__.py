@@ -12,7 +12,7 @@ import importlib
 import sys
 import warnings
 
-SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce")
+SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "validity")
 
 
 def build_parser() -> argparse.ArgumentParser:
