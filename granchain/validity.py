@@ -442,6 +442,16 @@ def report_section(validity=None, distributions=None, dephasing=None) -> str:
                              f"{g('mean_peak_error_effective')} | {g('arrival_time_error_bca')} | "
                              f"{g('arrival_time_width_ratio_bca', False)} |")
         lines.append("")
+        for name, label in (("arrival_time_error_effective", "effective chain, mean arrival time"),
+                            ("averaged_pulse_peak_error_effective", "effective chain, averaged-pulse peak"),
+                            ("arrival_time_error_bca", "BCA, mean arrival time")):
+            ok = [f"{n} (N={int(N)})" for n in d["distribution"].values for N in d["n_large"].values
+                  if abs(float(d[name].sel(distribution=n, n_large=N))) < 0.01]
+            bad = [f"{n} (N={int(N)}: {100 * float(d[name].sel(distribution=n, n_large=N)):+.2f} %)"
+                   for n in d["distribution"].values for N in d["n_large"].values
+                   if not abs(float(d[name].sel(distribution=n, n_large=N))) < 0.01]
+            lines.append(f"- {label} within 1 %: {', '.join(ok) or 'none'}; not: {', '.join(bad) or 'none'}")
+        lines.append("")
     if dephasing is not None:
         lines += ["### The averaged-pulse decay", "", str(dephasing), ""]
     return "\n".join(lines)

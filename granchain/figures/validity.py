@@ -11,12 +11,13 @@ import numpy as np
 
 from .. import validity
 
-#: The measures drawn by default: (variable, colour-bar label).
+#: The measures drawn by default: (variable, colour-bar label, reference): |variable - reference| in %.
 PANELS = (
-    ("arrival_time_error_effective", "effective: mean arrival time error (%)"),
-    ("averaged_pulse_peak_error_effective", r"effective: max$_t\langle v_k\rangle$ error (%)"),
-    ("mean_peak_error_effective", r"effective: $\langle\max_t v_k\rangle$ error (%)"),
-    ("arrival_time_error_bca", "BCA: mean arrival time error (%)"),
+    ("arrival_time_error_effective", "effective: mean arrival time error (%)", 0.0),
+    ("averaged_pulse_peak_error_effective", r"effective: $\mathrm{max}_t\,\langle v_k\rangle$ error (%)", 0.0),
+    ("mean_peak_error_effective", r"effective: $\langle \mathrm{max}_t\, v_k\rangle$ error (%)", 0.0),
+    ("arrival_time_error_bca", "BCA: mean arrival time error (%)", 0.0),
+    ("arrival_time_width_ratio_bca", "BCA: arrival-time width error (%)", 1.0),
 )
 
 
@@ -26,7 +27,7 @@ def compute(out, **kwargs):
 
 
 def plot(ds, ax=None, panels=PANELS):
-    """Heat maps of |measure| (in %) vs (alpha, beta), with the 1 % and 5 % contours of |measure|.
+    """Heat maps of |measure - reference| (in %) vs (alpha, beta), with its 1 % and 5 % contours.
 
     ``ax``: an array of axes of shape (len(panels), n_large) or None (a new figure). Returns the figure.
     """
@@ -41,8 +42,8 @@ def plot(ds, ax=None, panels=PANELS):
         ax = np.asarray(ax).reshape(len(panels), len(Ns))
         fig = ax[0, 0].figure
     a, b = ds["alpha"].values, ds["beta"].values
-    for r, (name, label) in enumerate(panels):
-        vals = np.abs(ds[name].values) * 100.0
+    for r, (name, label, ref) in enumerate(panels):
+        vals = np.abs(ds[name].values - ref) * 100.0
         finite = vals[np.isfinite(vals) & (vals > 0)]
         norm = LogNorm(vmin=max(finite.min(), 1e-2), vmax=max(finite.max(), 10.0)) if finite.size else None
         for c, N in enumerate(Ns):
