@@ -106,8 +106,9 @@ class Integrator:
         ``["energy_error"]``, ``["n_steps"]``, ``["t_end"]`` (R,), adds the fixed-point
         sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) and
         counts them in ``["n_valid"]`` (1,). With ``out["lags"]`` (L,), also adds the aligned
-        pulse's sums to ``["sum_a"]``/``["sum_a2"]`` (L, K) (``_kernels._aligned``). This generic version loops in Python over
-        :meth:`integrate`; compiled integrators override it with a parallel kernel.
+        pulse's sums to ``["sum_a"]``/``["sum_a2"]`` (L, K) (``_kernels._aligned``). This
+        generic version loops in Python over :meth:`integrate`; compiled integrators override
+        it with a parallel kernel.
         """
         from ._chain import Chain
 
@@ -126,7 +127,8 @@ class Integrator:
                 out["n_valid"][0] += 1
                 accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])
                 lags, sum_a, sum_a2 = _aligned_outputs(out, len(observed))
-                accumulate_aligned(t_grid, np.ascontiguousarray(grid_v), np.asarray(peak_t, dtype=float), lags, scale, sum_a, sum_a2)
+                accumulate_aligned(t_grid, np.ascontiguousarray(grid_v), np.asarray(peak_t, dtype=float), lags, scale,
+                                   sum_a, sum_a2)
 
 
 class _Compiled(Integrator):

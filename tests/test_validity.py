@@ -59,6 +59,7 @@ def test_map_measures_match_a_direct_computation(small_map):
     p = ds.sel(alpha=0.01, beta=0.4, n_large=6)
     assert float(p["arrival_time_error_effective"]) == pytest.approx(te.mean() / td.mean() - 1.0, rel=1e-12)
     assert float(p["arrival_time_ks_effective"]) == pytest.approx(stats.ks_2samp(te, td).statistic, rel=1e-12)
+    assert float(p["arrival_time_iqr_error_effective"]) == pytest.approx(stats.iqr(te) / stats.iqr(td) - 1.0, rel=1e-9)
     from granchain import analysis
 
     pk_d = analysis.averaged_pulse_peak(point, "decorated").velocity
