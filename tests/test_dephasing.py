@@ -100,7 +100,7 @@ def test_single_realisation_peaks_decay_by_stiffness_disorder_not_mass_disorder(
 
 @pytest.mark.slow
 def test_dephasing_from_the_ensembles_own_data_n26():
-    """The issue's check: N = 26, 3000 realisations, level 1 within 1 % for k = 4..25 (~3-5 min on 2
+    """The issue's check: N = 26, 3000 realisations, level 1 within 1 % for k = 4..25 (81 s to 3 min on 2
     shared cores). Measured (seed 2026): max 0.77 %, rms 0.39 %; closed forms: s_k measured max 1.44 %,
     Gaussian-limit s_k 3.57 %, BCA Eq. (total-time-1) s_k on the actual radii 3.74 % (rms 1.60 %)."""
     ds = gc.run_ensemble(gc.RandomDecorated(26), realizations=3000, seed=2026, chains="decorated", lags=LAGS, progress=False)
