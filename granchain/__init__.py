@@ -6,7 +6,7 @@ The founding reference is U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg,
 
 from ._version import __version__
 from ._chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered, wall_stiffness
-from ._distributions import Truncated, Uniform, as_distribution, small_radius_distribution
+from ._distributions import Mixture, Truncated, Uniform, as_distribution, small_radius_distribution
 from ._effective import effective, effective_parameters
 from ._random import draw_small_radii, random_decorated, realization_rng
 from ._status import Status
@@ -43,6 +43,7 @@ __all__ = [
     "INTEGRATORS",
     "Integrator",
     "Material",
+    "Mixture",
     "PulseResult",
     "RandomDecorated",
     "RandomRadii",
@@ -78,3 +79,4 @@ __all__ = [
     "tapered",
     "to_physical",
 ]
+from . import dephasing, validity  # noqa: E402  (issue 13: validity maps, the averaged-pulse decay)

@@ -71,6 +71,7 @@ class EnsembleSpec:
     t_grid: np.ndarray = field(default=None, repr=False)
     chunk_size: int = 500
     controls: RunControls = field(default_factory=RunControls)
+    lags: np.ndarray = field(default=None, repr=False)
 
     def __post_init__(self):
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
@@ -95,6 +96,13 @@ class EnsembleSpec:
         set_("chunk_size", count("chunk_size", self.chunk_size, minimum=1))
         if not isinstance(self.controls, RunControls):
             raise ValueError(f"controls must be a granchain.RunControls, got {self.controls!r}")
+        if self.lags is not None:  # the aligned pulse (granchain._kernels._aligned); None: not accumulated
+            lags = np.array(np.asarray(self.lags, dtype=float).reshape(-1))
+            if lags.size == 0 or not np.all(np.isfinite(lags)) or np.any(np.diff(lags) <= 0):
+                raise ValueError("lags must be a non-empty, finite, increasing array of times relative to each "
+                                 "realisation's peak (e.g. numpy.arange(-10, 10.05, 0.1)), or None")
+            lags.setflags(write=False)
+            set_("lags", lags)
 
     @property
     def n_chunks(self) -> int:
@@ -109,7 +117,7 @@ class EnsembleSpec:
 
     def describe(self) -> dict:
         """JSON-able record of the parameters (stored with the results, compared on resume)."""
-        return {
+        record = {
             "family": self.family.describe(),
             "realizations": self.realizations,
             "seed": self.seed,
@@ -123,6 +131,10 @@ class EnsembleSpec:
             "max_steps": self.controls.max_steps,
             "granchain_version": __version__,
         }
+        if self.lags is not None:  # only then: stores without the aligned pulse keep their 0.1/0.2 record
+            record["lags"] = {"start": float(self.lags[0]), "stop": float(self.lags[-1]), "size": int(self.lags.size),
+                              "checksum": float(np.sum(self.lags * np.arange(1, self.lags.size + 1)))}
+        return record
 
 
 # --------------------------------------------------------------------------- compute
@@ -217,6 +229,10 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
     scale = float(2.0**spec.fixed_point_bits)
     per_chain = ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "peak_wall", "status", "energy_error", "n_steps",
                  "t_end", "sum_v", "sum_v2", "sum_wall", "n_valid")
+    if spec.lags is not None:  # the aligned pulse, lag-major in the kernels
+        out["sum_a"] = np.zeros((nc, spec.lags.size, K), dtype=np.int64)
+        out["sum_a2"] = np.zeros((nc, spec.lags.size, K), dtype=np.int64)
+        per_chain += ("sum_a", "sum_a2")
     for ci, name in enumerate(spec.chains):
         batch = family.build(params, name)
         masses = np.ascontiguousarray(batch.masses, dtype=float)
@@ -225,12 +241,14 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
         spec.integrator.integrate_batch(
             masses, np.ascontiguousarray(batch.stiffness, dtype=float), batch.n, v0,
             np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),
-            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, out={k: out[k][ci] for k in per_chain},
+            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale,
+            out={**{k: out[k][ci] for k in per_chain}, "lags": spec.lags},
         )
     out["peak_wall_force"] = np.ascontiguousarray(out["peak_wall"][..., 0])
     out["peak_wall_force_time"] = np.ascontiguousarray(out["peak_wall"][..., 1])
-    out["sum_v"] = np.ascontiguousarray(out["sum_v"].transpose(0, 2, 1))  # (chain, granule, time)
-    out["sum_v2"] = np.ascontiguousarray(out["sum_v2"].transpose(0, 2, 1))
+    for name in ("sum_v", "sum_v2", "sum_a", "sum_a2"):
+        if name in out:  # (chain, granule, time | lag)
+            out[name] = np.ascontiguousarray(out[name].transpose(0, 2, 1))
     return out
 
 
@@ -280,7 +298,7 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
                  integrator=None, n: float = HERTZ, rtol: float | None = None, atol: float | None = None, t_grid=None,
                  chunk_size: int = 500, out=None, resume: bool = True, client=None, progress: bool = True,
                  momentum_conserving: bool = False, exit_margin: float = 3.0, peak_rtol: float = 1e-6,
-                 max_steps: int = 20_000_000, threads: int | None = None, n_large: int | None = None):
+                 max_steps: int = 20_000_000, threads: int | None = None, n_large: int | None = None, lags=None):
     """Integrate ``realizations`` random chains of a family, with any registered integrator.
 
     Parameters
@@ -322,6 +340,11 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         Run controls, as in :func:`granchain.simulate` (:class:`granchain.RunControls`).
     threads : int, optional
         Numba threads for local runs, 1 .. the cores Numba can use (default: all cores).
+    lags : array, optional
+        Also accumulate the *aligned* pulse <v_k(t_k^peak + tau)> on these lags tau (times relative
+        to each realisation's own peak time at k; variables ``aligned_velocity``,
+        ``aligned_velocity_stderr`` with dim ``lag``; see :mod:`granchain.dephasing`).
+        Default None: not accumulated (the store is then exactly as without this option).
 
     Ctrl-C raises :class:`EnsembleInterrupted` (a KeyboardInterrupt) whose message says where the
     finished chunks are saved.
@@ -335,7 +358,7 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         family = n_large
     fam = _family_of(family, distribution, n, momentum_conserving)
     spec = EnsembleSpec(fam, realizations, seed, chains, _integrator_of(integrator, rtol, atol), t_grid, chunk_size,
-                        RunControls(exit_margin, max_steps, peak_rtol))
+                        RunControls(exit_margin, max_steps, peak_rtol), lags)
     threads = _threads(threads)
     if not isinstance(resume, (bool, np.bool_)):
         raise ValueError(f"resume must be True or False, got {resume!r}")

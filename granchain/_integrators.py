@@ -23,6 +23,7 @@ from typing import ClassVar
 import numpy as np
 
 from ._kernels._common import INFO_SIZE, INFO_STEPS, INFO_T_END, power_code, total_energy
+from ._kernels._aligned import accumulate_aligned
 from ._kernels._dispatch import KERNEL_DP5, KERNEL_VERLET, integrate_chain
 from ._kernels._ensemble import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces, integrate_batch
 from ._reference import dop853_integrate
@@ -71,6 +72,15 @@ def _outputs(n_observed: int, n_grid: int, n_granules: int):
             np.zeros(n_granules - 1), np.zeros(n_grid), np.zeros(INFO_SIZE))
 
 
+def _aligned_outputs(out: dict, n_observed: int):
+    """(lags, sum_a, sum_a2) of ``out`` for the aligned pulse (``_kernels._aligned``); an empty
+    lag grid (no aligned pulse asked) when ``out`` has no ``"lags"``."""
+    if out.get("lags") is None:
+        empty = np.zeros((0, n_observed), dtype=np.int64)
+        return np.zeros(0), empty, empty.copy()
+    return np.asarray(out["lags"], dtype=float), out["sum_a"], out["sum_a2"]
+
+
 class Integrator:
     """Base of every integrator: a frozen dataclass of settings with a ``name`` and an ``order``."""
 
@@ -101,9 +111,10 @@ class Integrator:
         wall's peak force and its time; only for chains ending in a wall), ``["status"]``,
         ``["energy_error"]``, ``["n_steps"]``, ``["t_end"]`` (R,), adds the fixed-point
         sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) (and of
-        the wall force to ``["sum_wall"]`` (T,)) and counts them in ``["n_valid"]`` (1,). This
-        generic version loops in Python over :meth:`integrate`; compiled integrators override it
-        with a parallel kernel.
+        the wall force to ``["sum_wall"]`` (T,)) and counts them in ``["n_valid"]`` (1,). With
+        ``out["lags"]`` (L,), also adds the aligned pulse's sums to ``["sum_a"]``/``["sum_a2"]``
+        (L, K) (``_kernels._aligned``). This generic version loops in Python over
+        :meth:`integrate`; compiled integrators override it with a parallel kernel.
         """
         from ._chain import Chain
 
@@ -125,6 +136,9 @@ class Integrator:
                 accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])
                 if wall:
                     accumulate_fixed_point_1d(grid_f, scale, out["sum_wall"])
+                lags, sum_a, sum_a2 = _aligned_outputs(out, len(observed))
+                accumulate_aligned(t_grid, np.ascontiguousarray(grid_v), np.asarray(peak_t, dtype=float), lags, scale,
+                                   sum_a, sum_a2)
 
 
 class _Compiled(Integrator):
@@ -159,7 +173,7 @@ class _Compiled(Integrator):
             t_max, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, scale, numba.get_num_threads(),
             out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
             out["status"], out["energy_error"], out["n_steps"], out["t_end"], out["sum_v"], out["sum_v2"], out["sum_wall"],
-            out["n_valid"],
+            out["n_valid"], *_aligned_outputs(out, observed.shape[0]),
         )
 
 

@@ -27,8 +27,9 @@ import numpy as np
 from ._status import NOT_COMPUTED, Status, describe_codes
 from ._version import __version__
 
-__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "PROGRESS", "MemorySink", "ZarrSink", "StoreRepairWarning",
-           "stored_record", "check_same_parameters", "checked_variables", "result_variables", "per_realisation_variables"]
+__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "MemorySink",
+           "ZarrSink", "StoreRepairWarning", "stored_record", "check_same_parameters", "checked_variables", "result_variables",
+           "per_realisation_variables"]
 
 UNITS_V = "V_1 (velocity of the struck granule; rescaled, paper Sec. II)"
 UNITS_T = "rescaled time (paper Sec. II)"
@@ -107,6 +108,15 @@ AVERAGED = (
     Variable("n_valid", ("chain",), "int64", 0, "1", "successful realisations in mean_velocity"),
 )
 
+#: The aligned pulse (only in ensembles run with ``lags``): <v_k(t_k^peak + tau)> over successful
+#: realisations, each shifted by its own peak time at k (granchain._kernels._aligned).
+ALIGNED = (
+    Variable("aligned_velocity", ("chain", "granule", "lag"), "float64", np.nan, UNITS_V,
+             "aligned pulse <v_k(t_k^peak + tau)>: velocity of large granule k at lag tau after the realisation's own peak there"),
+    Variable("aligned_velocity_stderr", ("chain", "granule", "lag"), "float64", np.nan, UNITS_V,
+             "standard error of the aligned pulse"),
+)
+
 #: The ``progress`` group: one storage chunk per run chunk.
 PROGRESS = (
     Variable("sum_v", ("chunk", "chain", "granule", "time"), "int64", 0, "2^-fixed_point_bits V_1",
@@ -119,8 +129,32 @@ PROGRESS = (
     Variable("done", ("chunk",), "int8", 0, "1", "1 once every result of the chunk and its checksums are on disk"),
 )
 
+#: The aligned pulse's fixed-point sums per chunk, in the ``progress`` group (with ``lags`` only).
+PROGRESS_ALIGNED = (
+    Variable("sum_a", ("chunk", "chain", "granule", "lag"), "int64", 0, "2^-fixed_point_bits V_1",
+             "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau) * 2^bits)"),
+    Variable("sum_a2", ("chunk", "chain", "granule", "lag"), "int64", 0, "2^-fixed_point_bits V_1^2",
+             "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau)^2 * 2^bits)"),
+)
+
 #: The progress variables that hold one run chunk's results (checked like the per-realisation results).
 PROGRESS_SUMS = ("sum_v", "sum_v2", "n_valid")
+
+
+def progress_sums(spec) -> tuple:
+    """Names of the progress variables holding one chunk's results: :data:`PROGRESS_SUMS`, and the
+    aligned pulse's sums with ``lags``."""
+    return PROGRESS_SUMS + (tuple(v.name for v in PROGRESS_ALIGNED) if spec.lags is not None else ())
+
+
+def averaged_variables(spec) -> tuple:
+    """The averaged variables of a run: :data:`AVERAGED`, plus :data:`ALIGNED` when it has ``lags``."""
+    return AVERAGED + (ALIGNED if spec.lags is not None else ())
+
+
+def progress_variables(spec) -> tuple:
+    """The ``progress`` group's variables: :data:`PROGRESS`, plus :data:`PROGRESS_ALIGNED` with ``lags``."""
+    return PROGRESS + (PROGRESS_ALIGNED if spec.lags is not None else ())
 
 
 def parameter_variables(family) -> tuple:
@@ -132,14 +166,15 @@ def parameter_variables(family) -> tuple:
 
 def _sizes(spec) -> dict:
     return {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
-            "checked": len(checked_variables(spec)), "contact": spec.family.n_contacts, **spec.family.dim_sizes()}
+            "checked": len(checked_variables(spec)), "contact": spec.family.n_contacts, **spec.family.dim_sizes(),
+            **({"lag": spec.lags.size} if spec.lags is not None else {})}
 
 
 def checked_variables(spec) -> list[str]:
     """Every variable whose chunk values are checksummed: the family's parameters and results
     (:func:`per_realisation_variables`, read from the schema, so new results are checked
     automatically) and the progress sums."""
-    return [v.name for v in per_realisation_variables(spec.family)] + [f"progress/{name}" for name in PROGRESS_SUMS]
+    return [v.name for v in per_realisation_variables(spec.family)] + [f"progress/{name}" for name in progress_sums(spec)]
 
 
 def digest(values, dtype) -> int:
@@ -227,7 +262,10 @@ def empty_dataset(spec, lazy: bool):
     }
     for dim, (values, long_name) in family.dims().items():
         coords[dim] = (dim, np.asarray(values), {"long_name": long_name})
-    variables = per_realisation_variables(family) + AVERAGED
+    if spec.lags is not None:
+        coords["lag"] = ("lag", np.asarray(spec.lags), {"units": UNITS_T,
+                                                        "long_name": "time tau after the realisation's own peak time at k"})
+    variables = per_realisation_variables(family) + averaged_variables(spec)
     return xr.Dataset({v.name: var(v) for v in variables}, coords=coords, attrs=_attrs(spec))
 
 
@@ -237,7 +275,7 @@ def progress_dataset(spec):
 
     sizes = _sizes(spec)
     data, encoding = {}, {}
-    for v in PROGRESS:
+    for v in progress_variables(spec):
         shape = tuple(sizes[d] for d in v.dims)
         data[v.name] = (v.dims, np.full(shape, v.fill, dtype=v.dtype), v.metadata())
         encoding[v.name] = {"chunks": (1,) + shape[1:]}
@@ -257,18 +295,25 @@ def chunk_dataset(spec, res: dict):
     return xr.Dataset(out)
 
 
-def finalize(ds, spec, sum_v, sum_v2, n_valid):
-    """mean_velocity and its standard error from the exact fixed-point sums."""
-    scale = 2.0**spec.fixed_point_bits
-    nv = n_valid.astype(float)[:, None, None]
+def mean_from_sums(sum_v, sum_v2, n_valid, bits: int):
+    """(mean, standard error) over the last axes from fixed-point sums (chain, ...) and counts (chain,)."""
+    scale = 2.0**bits
+    nv = n_valid.astype(float).reshape((-1,) + (1,) * (sum_v.ndim - 1))
     s1 = sum_v.astype(float) / scale
     s2 = sum_v2.astype(float) / scale
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = s1 / nv
         var = np.maximum(s2 - s1 * mean, 0.0) / (nv - 1.0)
         stderr = np.sqrt(var / nv)
-    ds["mean_velocity"].values = np.where(nv > 0, mean, np.nan)
-    ds["mean_velocity_stderr"].values = np.where(nv > 1, stderr, np.nan)
+    return np.where(nv > 0, mean, np.nan), np.where(nv > 1, stderr, np.nan)
+
+
+def finalize(ds, spec, sum_v, sum_v2, n_valid, sum_a=None, sum_a2=None):
+    """mean_velocity (and the aligned pulse, with ``lags``) and standard errors from the exact fixed-point sums."""
+    ds["mean_velocity"].values, ds["mean_velocity_stderr"].values = mean_from_sums(sum_v, sum_v2, n_valid, spec.fixed_point_bits)
+    if spec.lags is not None:
+        ds["aligned_velocity"].values, ds["aligned_velocity_stderr"].values = mean_from_sums(
+            sum_a, sum_a2, n_valid, spec.fixed_point_bits)
     ds["n_valid"].values = n_valid.astype(np.int64)
     return ds
 
@@ -283,6 +328,9 @@ class MemorySink:
         self.sum_v = np.zeros(shape, dtype=np.int64)
         self.sum_v2 = np.zeros(shape, dtype=np.int64)
         self.n_valid = np.zeros((spec.n_chunks, len(spec.chains)), dtype=np.int64)
+        if spec.lags is not None:
+            shape = (spec.n_chunks, len(spec.chains), spec.family.n_observed, spec.lags.size)
+            self.sum_a, self.sum_a2 = np.zeros(shape, dtype=np.int64), np.zeros(shape, dtype=np.int64)
 
     def pending(self) -> list[int]:
         return list(range(self.spec.n_chunks))
@@ -293,9 +341,12 @@ class MemorySink:
         for name, values in chunk_dataset(self.spec, res).data_vars.items():
             self.ds[name][{"realization": sl}] = values
         self.sum_v[j], self.sum_v2[j], self.n_valid[j] = res["sum_v"], res["sum_v2"], res["n_valid"][:, 0]
+        if self.spec.lags is not None:
+            self.sum_a[j], self.sum_a2[j] = res["sum_a"], res["sum_a2"]
 
     def finalize(self):
-        return finalize(self.ds, self.spec, self.sum_v.sum(0), self.sum_v2.sum(0), self.n_valid.sum(0))
+        aligned = (self.sum_a.sum(0), self.sum_a2.sum(0)) if self.spec.lags is not None else ()
+        return finalize(self.ds, self.spec, self.sum_v.sum(0), self.sum_v2.sum(0), self.n_valid.sum(0), *aligned)
 
 
 class StoreRepairWarning(UserWarning):
@@ -537,7 +588,7 @@ class ZarrSink:
             arr.resize(tuple(spec.realizations if d == "realization" else n for d, n in zip(v.dims, arr.shape)))
         group["realization"].resize((spec.realizations,))
         group["realization"][old.realizations:] = np.arange(old.realizations, spec.realizations)
-        for v in PROGRESS:
+        for v in progress_variables(spec):
             arr = zarr.open_array(store=self.path, path=f"progress/{v.name}", mode="r+", zarr_format=2,
                                   config={"write_empty_chunks": True})
             shape = (spec.n_chunks,) + arr.shape[1:]
@@ -571,20 +622,15 @@ class ZarrSink:
         data = chunk_dataset(spec, res)
         data.to_zarr(self.path, region={"realization": spec.chunk_slice(j)}, mode="r+", consolidated=False,
                      write_empty_chunks=True, **_fmt2())
-        sums = {
-            "sum_v": res["sum_v"][None],
-            "sum_v2": res["sum_v2"][None],
-            "n_valid": res["n_valid"].T,
-        }
-        dtypes = {v.name: v.dtype for v in PROGRESS}
+        # One chunk's sums, with a leading chunk axis (n_valid is (chain, 1) in the result).
+        sums = {name: (res[name].T if name == "n_valid" else res[name][None]) for name in progress_sums(spec)}
+        table = {v.name: v for v in progress_variables(spec)}
         values = {name: data[name].values for name in data.data_vars}
-        values.update({f"progress/{k}": np.asarray(a, dtype=dtypes[k]) for k, a in sums.items()})
+        values.update({f"progress/{k}": np.asarray(a, dtype=table[k].dtype) for k, a in sums.items()})
         check = np.array([[digest(values[name], values[name].dtype) for name in checked_variables(spec)]], dtype=np.int64)
         region = {"chunk": slice(j, j + 1)}
         xr.Dataset({
-            "sum_v": (("chunk", "chain", "granule", "time"), values["progress/sum_v"]),
-            "sum_v2": (("chunk", "chain", "granule", "time"), values["progress/sum_v2"]),
-            "n_valid": (("chunk", "chain"), values["progress/n_valid"]),
+            **{k: (table[k].dims, values[f"progress/{k}"]) for k in sums},
             "checksum": (("chunk", "checked"), check),
         }).to_zarr(self.path, group="progress", region=region, mode="r+", consolidated=False, write_empty_chunks=True,
                    **_fmt2())
@@ -601,11 +647,14 @@ class ZarrSink:
                 prog = p.load()
             with xr.open_zarr(self.path, consolidated=False) as d:
                 ds = d.load()
+            aligned = (prog["sum_a"].values.sum(0), prog["sum_a2"].values.sum(0)) if self.spec.lags is not None else ()
             ds = finalize(ds, self.spec, prog["sum_v"].values.sum(0), prog["sum_v2"].values.sum(0),
-                          prog["n_valid"].values.sum(0))
-            ds[[v.name for v in AVERAGED]].to_zarr(
-                self.path, region={"chain": slice(None), "granule": slice(None), "time": slice(None)}, mode="r+",
-                consolidated=False, **_fmt2())
+                          prog["n_valid"].values.sum(0), *aligned)
+            region = {"chain": slice(None), "granule": slice(None), "time": slice(None)}
+            if self.spec.lags is not None:
+                region["lag"] = slice(None)
+            ds[[v.name for v in averaged_variables(self.spec)]].to_zarr(self.path, region=region, mode="r+",
+                                                                         consolidated=False, **_fmt2())
             zarr.consolidate_metadata(self.path, zarr_format=2)
             return ds
         finally:

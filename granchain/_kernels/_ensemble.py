@@ -17,6 +17,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from ._aligned import accumulate_aligned
 from ._common import INFO_SIZE, INFO_STEPS, INFO_T_END, SUCCESS, has_wall, total_energy
 from ._dispatch import integrate_chain
 from ._jit import JIT, JIT_PARALLEL
@@ -59,7 +60,7 @@ def gather_forces(peak_f, peak_ft, contacts, wall, force_out, force_time_out, wa
 @njit(**JIT_PARALLEL)
 def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, contacts, t_max, exit_margin, max_steps, peak_rtol,
                     t_grid, scale, n_threads, peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps,
-                    t_end, sum_v, sum_v2, sum_wall, n_valid):
+                    t_end, sum_v, sum_v2, sum_wall, n_valid, lags, sum_a, sum_a2):
     """Integrate realisations r = 0..R-1 (rows of ``masses``/``stiffness``/``v_init``, shared ``obs``).
 
     ``kernel``/``params``: the integrator (see ``_dispatch``). Per realisation writes
@@ -70,6 +71,8 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, conta
     successful realisation's observed velocities on ``t_grid`` into sum_v / sum_v2
     (int64, (T, K)), with a wall round(F_wall * scale) into sum_wall (T,), and counts them in n_valid[0]. ``n_threads`` must be
     numba.get_num_threads() (passed in: calling it here would stop Numba from caching).
+    With a non-empty ``lags`` (L,), also adds the aligned pulse's sums (``_aligned``) into
+    sum_a / sum_a2 (int64, (L, K)); with an empty one those stay untouched.
     """
     R, M = masses.shape
     K = obs.shape[0]
@@ -78,6 +81,9 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, conta
     acc2 = np.zeros((n_threads, T, K), dtype=np.int64)
     accw = np.zeros((n_threads, T), dtype=np.int64)
     cnt = np.zeros(n_threads, dtype=np.int64)
+    L = lags.shape[0]
+    al1 = np.zeros((n_threads, L, K), dtype=np.int64)
+    al2 = np.zeros((n_threads, L, K), dtype=np.int64)
     for r in prange(R):
         tid = numba.get_thread_id()
         m = masses[r]
@@ -105,6 +111,7 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, conta
             accumulate_fixed_point(grid_v, scale, acc1[tid], acc2[tid])
             if wall:
                 accumulate_fixed_point_1d(grid_f, scale, accw[tid])
+            accumulate_aligned(t_grid, grid_v, peak_t[r], lags, scale, al1[tid], al2[tid])
     for th in range(n_threads):
         n_valid[0] += cnt[th]
         for g in range(T):
@@ -112,3 +119,7 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, conta
                 sum_v[g, q] += acc1[th, g, q]
                 sum_v2[g, q] += acc2[th, g, q]
             sum_wall[g] += accw[th, g]
+        for g in range(L):
+            for q in range(K):
+                sum_a[g, q] += al1[th, g, q]
+                sum_a2[g, q] += al2[th, g, q]

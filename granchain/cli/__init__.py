@@ -12,7 +12,7 @@ import importlib
 import sys
 import warnings
 
-SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "info", "export")
+SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "validity", "info", "export")
 
 
 def build_parser() -> argparse.ArgumentParser:
