@@ -11,7 +11,7 @@ from ._effective import effective, effective_parameters
 from ._random import draw_small_radii, random_decorated, realization_rng
 from ._status import Status
 from ._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
-from ._integrators import DOP853, DP5, INTEGRATORS, Integrator, RunControls, Verlet, get_integrator
+from ._integrators import DOP853, DP5, INTEGRATORS, Integrator, RunControls, Verlet, VerletStabilityWarning, get_integrator
 from ._simulate import PulseResult, default_t_max, simulate
 from .families import (
     FAMILIES,
@@ -54,6 +54,7 @@ __all__ = [
     "Truncated",
     "Uniform",
     "Verlet",
+    "VerletStabilityWarning",
     "__version__",
     "as_distribution",
     "decorated",

@@ -176,9 +176,8 @@ class Mixture(_Base):
     """A finite mixture sum_i w_i p_i(r) of granchain distributions (e.g. a bimodal law of two
     :class:`Truncated` normals). Weights are normalised to sum 1. ``ppf`` inverts the mixture's cdf
     by bisection to machine precision (64 halvings of the support), so ``sample`` stays one
-    uniform per radius, like the other distributions. Example::
-
-        Mixture((Truncated(stats.norm(0.05, 0.02), 0.01, 0.4), Truncated(stats.norm(0.35, 0.02), 0.01, 0.4)))
+    uniform per radius, like the other distributions. A bimodal law on [0.01, 0.4]:
+    ``Mixture((Truncated(stats.norm(0.05, 0.02), 0.01, 0.4), Truncated(stats.norm(0.35, 0.02), 0.01, 0.4)))``.
     """
 
     components: tuple

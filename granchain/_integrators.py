@@ -238,8 +238,8 @@ class Verlet(_Compiled):
 
     Stability: velocity Verlet is stable only for dt * omega_max <= 2, omega_max the chain's highest
     linearised angular frequency. Before integrating, ``dt`` is checked against the safe upper bound
-    of :func:`verlet_omega_max` (every contact at most as compressed as if it held all the pulse's
-    energy; Gershgorin bound of M^-1 K); a :class:`VerletStabilityWarning` is issued when
+    of ``granchain._integrators.verlet_omega_max`` (every contact at most as compressed as if it held all the pulse's
+    energy; Gershgorin bound of M^-1 K); a :class:`granchain.VerletStabilityWarning` is issued when
     dt * omega_max > 2 (the bound is conservative: near it, compare with a smaller dt or DP5).
     Not checked for n < 2, where the contact stiffness has no bound.
     """
@@ -257,7 +257,7 @@ class Verlet(_Compiled):
         return np.array([self.dt])
 
     def check_chains(self, masses, stiffness, n, initial_velocity) -> None:
-        """Warn (:class:`VerletStabilityWarning`) where dt * omega_max > 2 (see the class docstring)."""
+        """Warn (:class:`granchain.VerletStabilityWarning`) where dt * omega_max > 2 (see the class docstring)."""
         import warnings
 
         omega = verlet_omega_max(masses, stiffness, n, initial_velocity)
