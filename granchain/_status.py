@@ -34,7 +34,8 @@ class Status(enum.IntEnum):
 
 
 _MESSAGES = {
-    Status.SUCCESS: "finished: the pulse left the last granule (stop='exit') or t_max was reached (stop='t_max')",
+    Status.SUCCESS: "finished: the pulse left the last granule, or came back from the wall (stop='exit'), "
+                    "or t_max was reached (stop='t_max')",
     Status.T_MAX: "t_max was reached before the pulse left the last granule: raise t_max",
     Status.MAX_STEPS: "the step budget (max_steps) ran out: raise max_steps or loosen rtol",
     Status.STEP_UNDERFLOW: "the step size underflowed: the chain is too stiff for these tolerances",
