@@ -251,6 +251,21 @@ def initial_records(obs, v, t_grid, peak_v, peak_t, grid_v):
 
 
 @njit(**JIT)
+def initial_force_records(x, m, c, n, pw, g, peak_f, peak_ft, grid_f):
+    """No contact has a force peak yet (0 at t = 0); with a wall, its force at the ``g`` grid times
+    <= 0 (the state at t = 0). Returns whether the chain ends in a wall."""
+    M = x.shape[0]
+    wall = has_wall(m)
+    for j in range(M - 1):
+        peak_f[j] = 0.0
+        peak_ft[j] = 0.0
+    if wall:
+        for gg in range(g):
+            grid_f[gg] = contact_force(x[M - 2] - x[M - 1], c[M - 2], n, pw)
+    return wall
+
+
+@njit(**JIT)
 def is_new_peak(candidate, current, peak_rtol):
     """Does a local maximum ``candidate`` replace the recorded peak ``current``?
 

@@ -34,6 +34,7 @@ from ._common import (
     contact_force,
     final_peaks,
     is_new_peak,
+    initial_force_records,
     initial_records,
     initial_window,
     is_finite_window,
@@ -114,16 +115,34 @@ def _dense_accel(theta, k, x, Kx, h, c, inv_m, n, pw, Q):
     return (left - right) * inv_m[k]
 
 
-@njit(**JIT)
-def _acceleration_root(k, a0, a1, x, Kx, h, c, inv_m, n, pw, Q):
-    """First theta in [0, 1] where the acceleration of k stops being positive.
+#: What :func:`_first_root` follows across a step: the acceleration of a granule (its velocity
+#: maximum) or the relative velocity of a contact (its compression, i.e. force, maximum).
+ROOT_ACCELERATION = 0
+ROOT_APPROACH = 1
 
-    Illinois (modified regula falsi) while the bracket has a strictly negative
-    end; bisection while it ends on an exact zero (a contact that opened: the
-    acceleration is then zero on a whole interval and the first zero is wanted).
+
+@njit(**JIT)
+def _root_function(what, i, theta, x, v, Kx, Kv, h, c, inv_m, n, pw, Q):
+    """The followed function at t + theta h on the dense output: the acceleration of granule i, or
+    the relative velocity v_i - v_{i+1} of contact i."""
+    if what == ROOT_ACCELERATION:
+        return _dense_accel(theta, i, x, Kx, h, c, inv_m, n, pw, Q)
+    dense_weights(theta, Q)
+    return dense_value(v[i], Kv, i, h, Q) - dense_value(v[i + 1], Kv, i + 1, h, Q)
+
+
+@njit(**JIT)
+def _first_root(what, i, f0, f1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q):
+    """First theta in [0, 1] where the followed function (+ at 0, <= 0 at 1) stops being positive:
+    a granule's velocity maximum (``ROOT_ACCELERATION``) or a contact's compression maximum
+    (``ROOT_APPROACH``).
+
+    Illinois (modified regula falsi) while the bracket has a strictly negative end; bisection
+    while it ends on an exact zero (a contact that opened: the acceleration is then zero on a
+    whole interval and the first zero is wanted).
     """
     lo, hi = 0.0, 1.0
-    f_lo, f_hi = a0, a1
+    f_lo, f_hi = f0, f1
     theta = 0.0
     side = 0
     for _ in range(200):
@@ -133,39 +152,7 @@ def _acceleration_root(k, a0, a1, x, Kx, h, c, inv_m, n, pw, Q):
                 theta = 0.5 * (lo + hi)
         else:
             theta = 0.5 * (lo + hi)
-        f = _dense_accel(theta, k, x, Kx, h, c, inv_m, n, pw, Q)
-        if f > 0.0:
-            lo, f_lo = theta, f
-            if side == -1:
-                f_hi *= 0.5
-            side = -1
-        else:
-            hi, f_hi = theta, f
-            if side == 1:
-                f_lo *= 0.5
-            side = 1
-        if hi - lo < 1e-14:
-            break
-    return hi
-
-
-@njit(**JIT)
-def _approach_root(j, w0, w1, v, Kv, h, Q):
-    """First theta in [0, 1] where the relative velocity v_j - v_{j+1} (dense output; + at 0,
-    <= 0 at 1) stops being positive: the compression maximum of contact j. Illinois, with
-    bisection when the bracket ends on an exact zero."""
-    lo, hi = 0.0, 1.0
-    f_lo, f_hi = w0, w1
-    side = 0
-    for _ in range(200):
-        if f_hi < 0.0:
-            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            if not (lo < theta < hi):
-                theta = 0.5 * (lo + hi)
-        else:
-            theta = 0.5 * (lo + hi)
-        dense_weights(theta, Q)
-        f = dense_value(v[j], Kv, j, h, Q) - dense_value(v[j + 1], Kv, j + 1, h, Q)
+        f = _root_function(what, i, theta, x, v, Kx, Kv, h, c, inv_m, n, pw, Q)
         if f > 0.0:
             lo, f_lo = theta, f
             if side == -1:
@@ -310,13 +297,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    wall = has_wall(m)
-    for j in range(M - 1):
-        peak_f[j] = 0.0
-        peak_ft[j] = 0.0
-    for gg in range(g):
-        if wall:
-            grid_f[gg] = contact_force(x[M - 2] - x[M - 1], c[M - 2], n, pw)
+    wall = initial_force_records(x, m, c, n, pw, g, peak_f, peak_ft, grid_f)
 
     h = h_fixed if h_fixed > 0.0 else h_init
     err_old = 1e-4
@@ -361,7 +342,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
             a0 = Kv[0, k]
             a1 = Kv[6, k]
             if a0 > 0.0 and a1 <= 0.0:
-                theta = _acceleration_root(k, a0, a1, x, Kx, h, c, inv_m, n, pw, Q)
+                theta = _first_root(ROOT_ACCELERATION, k, a0, a1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q)
                 dense_weights(theta, Q)
                 vp = dense_value(v[k], Kv, k, h, Q)
                 if is_new_peak(vp, peak_v[q], peak_rtol):
@@ -379,7 +360,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
                 d1 = xs[j] - xs[j + 1]
                 if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[j]:
                     continue
-                theta = _approach_root(j, w0, w1, v, Kv, h, Q)
+                theta = _first_root(ROOT_APPROACH, j, w0, w1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q)
                 fp = _contact_force_at(theta, j, x, Kx, h, c, n, pw, Q)
                 if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
                     peak_f[j] = fp

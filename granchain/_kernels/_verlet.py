@@ -23,6 +23,7 @@ from ._common import (
     accelerations,
     advance_window,
     final_peaks,
+    initial_force_records,
     initial_records,
     initial_window,
     is_finite_window,
@@ -78,13 +79,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    wall = has_wall(m)
-    for j in range(M - 1):
-        peak_f[j] = 0.0
-        peak_ft[j] = 0.0
-    for gg in range(g):
-        if wall:
-            grid_f[gg] = contact_force(x[M - 2] - x[M - 1], c[M - 2], n, pw)
+    wall = initial_force_records(x, m, c, n, pw, g, peak_f, peak_ft, grid_f)
     exit_since = -1.0
     n_acc = 0
     status = -1
