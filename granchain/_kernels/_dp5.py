@@ -40,7 +40,6 @@ from ._common import (
     is_finite_window,
     end_of_step,
     final_force_peaks,
-    has_wall,
     stop_time,
     write_info,
 )

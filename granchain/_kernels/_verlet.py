@@ -31,7 +31,6 @@ from ._common import (
     contact_force,
     end_of_step,
     final_force_peaks,
-    has_wall,
     stop_time,
     write_info,
 )
