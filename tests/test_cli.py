@@ -185,9 +185,13 @@ def test_ensemble_writes_a_store(tmp_path, capsys):
 
     store = tmp_path / "cli.zarr"
     code, out, err = run_cli(capsys, "ensemble", "--large", "4", "--realizations", "10", "--chunk-size", "4",
-                             "--seed", "7", "--chain", "effective", "--out", str(store), "--quiet", "--threads", "1")
+                             "--seed", "7", "--chain", "effective", "--out", str(store), "--threads", "1")
     assert code == 0, err
     assert out.startswith(f"wrote {store}") and "failed integrations: 0" in out
+    # --quiet: nothing but errors (the same store again: resumed, all chunks done)
+    code, out, err = run_cli(capsys, "ensemble", "--large", "4", "--realizations", "10", "--chunk-size", "4",
+                             "--seed", "7", "--chain", "effective", "--out", str(store), "--quiet", "--threads", "1")
+    assert code == 0 and out == "" and err == "", (out, err)
     with xr.open_dataset(store, engine="zarr") as ds:
         assert list(ds["chain"].values) == ["effective"] and ds.sizes["realization"] == 10
         assert ds.attrs["seed"] == 7

@@ -375,7 +375,7 @@ def test_cli_help_lists_families_and_integrators(capsys):
 def test_cli_families_write_the_api_result(tmp_path, capsys, args, family, integrator):
     store = tmp_path / "s.zarr"
     code, out, err = _cli(capsys, "ensemble", *args, "--realizations", "5", "--chunk-size", "2", "--seed", "3",
-                          "--out", str(store), "--quiet")
+                          "--out", str(store))
     assert code == 0, err
     assert family.label() in out
     ds = xr.open_dataset(store, engine="zarr")

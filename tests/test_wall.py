@@ -197,7 +197,7 @@ def test_cli_ensemble_wall_and_units(tmp_path, capsys):
 
     store = tmp_path / "w.zarr"
     assert main(["ensemble", "--family", "polydisperse", "--size", "5", "--wall", "--realizations", "3", "--chunk-size", "2",
-                 "--out", str(store), "--quiet", "--material", "steel", "--radius", "5mm", "--impact-speed", "1m/s"]) == 0
+                 "--out", str(store), "--material", "steel", "--radius", "5mm", "--impact-speed", "1m/s"]) == 0
     out = capsys.readouterr().out
     assert "peak wall force" in out and " N" in out
     ds = xr.open_dataset(store, engine="zarr")

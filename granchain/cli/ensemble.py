@@ -67,7 +67,7 @@ def add_parser(subparsers) -> None:
                         "--no-resume refuses an existing store")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")
     p.add_argument("--threads", type=int, default=None, help="Numba threads for a local run (default: all cores)")
-    p.add_argument("--quiet", action="store_true", help="no progress output: only errors, warnings about the store and the final one-line result")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors and warnings (no progress, no summary; failed integrations are reported on stderr)")
     from ._units import add_unit_arguments
 
     add_unit_arguments(p)
@@ -208,11 +208,16 @@ def run(args) -> int:
         if client is not None:
             client.close()
     failed = int((ds["status"] != 0).sum())
+    if units is not None:
+        _store_scale(args.out, units)
+    if args.quiet:
+        if failed:
+            print(f"granchain ensemble: warning: {failed} integrations did not succeed (see status in {args.out})", file=sys.stderr)
+        return 0
     print(f"wrote {args.out}: {family.label()}; {ds.sizes['realization']} realisations x {ds.sizes['chain']} chains "
           f"({', '.join(ds['chain'].values)}), {ds.sizes['granule']} observed granules, integrator "
           f"{integrator.name}; failed integrations: {failed}")
     if units is not None:
-        _store_scale(args.out, units)
         print(_physical_summary(ds, units))
         print(f"the store's attributes physical_* hold the scale; granchain.units.dataset_to_physical(ds, scale) adds SI variables")
     return 0
