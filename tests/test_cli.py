@@ -198,3 +198,16 @@ def test_ensemble_writes_a_store(tmp_path, capsys):
         ref = gc.run_ensemble(4, realizations=10, seed=7, chains="effective", chunk_size=4, progress=False)
         np.testing.assert_array_equal(ds["peak_time"].values, ref["peak_time"].values)
         np.testing.assert_array_equal(ds["mean_velocity"].values, ref["mean_velocity"].values)
+
+
+def test_a_reader_that_stops_early_is_not_an_error(tmp_path):
+    """`granchain pulse ... --json | head -c 20`: the closed pipe must not print an 'unexpected' error."""
+    import subprocess
+    import sys
+
+    radii = ",".join(["1"] * 2500)  # ~110 kB of JSON: more than a pipe buffer holds
+    proc = subprocess.run(f"{sys.executable} -m granchain pulse --radii {radii} --json | head -c 20", shell=True,
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                          env={**__import__("os").environ, "PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1])})
+    assert proc.stdout == '{"granule": [1, 2, 3'
+    assert "unexpected" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr

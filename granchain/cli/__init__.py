@@ -54,6 +54,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"granchain {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader stopped early (e.g. `| head`): not an error of the command
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # Python docs: silence the flush at exit
+        return 0
     except Exception as exc:  # noqa: BLE001 -- no raw tracebacks for users; GRANCHAIN_DEBUG=1 shows them
         import os
 
