@@ -179,10 +179,10 @@ def hermite_max_estimate(d0, w0, d1, w1, h):
 
 
 @njit(**JIT)
-def _contact_force_at(theta, j, x, Kx, h, c, n, pw, Q):
-    """c_j delta^(n-1) at t + theta h from the dense-output positions (Eq. motion_rescaled)."""
-    dense_weights(theta, Q)
-    return contact_force(dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q), c[j], n, pw)
+def _dense_compression(j, x, Kx, h, Q):
+    """Compression x_j - x_{j+1} of contact j from the dense-output positions at the time whose
+    weights ``Q`` holds (``dense_weights(theta, Q)`` already called)."""
+    return dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
 
 
 # Coefficients as scalars so that Numba folds them into the unrolled stages.
@@ -360,12 +360,13 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
                 if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[j]:
                     continue
                 theta = _first_root(ROOT_APPROACH, j, w0, w1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q)
-                fp = _contact_force_at(theta, j, x, Kx, h, c, n, pw, Q)
+                dense_weights(theta, Q)
+                dp = _dense_compression(j, x, Kx, h, Q)
+                fp = contact_force(dp, c[j], n, pw)  # Eq. (motion_rescaled): c_j delta^(n-1)
                 if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
                     peak_f[j] = fp
                     peak_ft[j] = t + theta * h
-                    dense_weights(theta, Q)
-                    peak_d[j] = dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
+                    peak_d[j] = dp
         while g < n_grid and t_grid[g] <= t + h:
             theta = (t_grid[g] - t) / h
             dense_weights(theta, Q)
@@ -373,7 +374,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
                 k = obs[q]
                 grid_v[g, q] = dense_value(v[k], Kv, k, h, Q) if k < hi else 0.0
             if wall:
-                grid_f[g] = _contact_force_at(theta, M - 2, x, Kx, h, c, n, pw, Q) if M - 2 < hi else 0.0
+                grid_f[g] = contact_force(_dense_compression(M - 2, x, Kx, h, Q), c[M - 2], n, pw) if M - 2 < hi else 0.0
             g += 1
 
         for i in range(hi):
