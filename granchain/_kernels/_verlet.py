@@ -40,23 +40,18 @@ ORDER = 2
 
 
 @njit(**JIT)
-def hermite_velocity(v0, a0, v1, a1, h, theta):
-    """Cubic Hermite interpolant of v through (v0, a0) and (v1, a1) at t + theta h."""
+def hermite(y0, dy0, y1, dy1, h, theta):
+    """Cubic Hermite interpolant of y through (y0, y0') and (y1, y1') at the step ends, at t + theta h:
+    the velocity from (v, a), the position from (x, v)."""
     t2 = theta * theta
     t3 = t2 * theta
-    return (2 * t3 - 3 * t2 + 1) * v0 + (t3 - 2 * t2 + theta) * h * a0 + (-2 * t3 + 3 * t2) * v1 + (t3 - t2) * h * a1
-
-
-@njit(**JIT)
-def hermite_position(x0, v0, x1, v1, h, theta):
-    """Cubic Hermite interpolant of x through (x0, v0) and (x1, v1) at t + theta h."""
-    return hermite_velocity(x0, v0, x1, v1, h, theta)
+    return (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * dy0 + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * dy1
 
 
 @njit(**JIT)
 def _hermite_force(j, x_old, v_old, x, v, h, theta, c, n, pw):
     """Contact force of contact j at t + theta h from the Hermite positions (Eq. motion_rescaled)."""
-    d = hermite_position(x_old[j], v_old[j], x[j], v[j], h, theta) - hermite_position(x_old[j + 1], v_old[j + 1], x[j + 1], v[j + 1], h, theta)
+    d = hermite(x_old[j], v_old[j], x[j], v[j], h, theta) - hermite(x_old[j + 1], v_old[j + 1], x[j + 1], v[j + 1], h, theta)
     return contact_force(d, c[j], n, pw)
 
 
@@ -106,7 +101,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
                 continue
             if a[k] > 0.0 and a_new[k] <= 0.0:
                 theta = a[k] / (a[k] - a_new[k])
-                vp = hermite_velocity(v_old[k], a[k], v[k], a_new[k], dt, theta)
+                vp = hermite(v_old[k], a[k], v[k], a_new[k], dt, theta)
                 if is_new_peak(vp, peak_v[q], peak_rtol):
                     peak_v[q] = vp
                     peak_t[q] = t + theta * dt
@@ -123,7 +118,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             theta = (t_grid[g] - t) / dt
             for q in range(n_obs):
                 k = obs[q]
-                grid_v[g, q] = hermite_velocity(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
+                grid_v[g, q] = hermite(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
             if wall:
                 grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, n, pw) if M - 2 < hi else 0.0
             g += 1
