@@ -370,9 +370,11 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         report.start(spec.realizations - sum(_size(spec.chunk_slice(j)) for j in pending), len(pending))
         if client is None:
             for j in pending:
-                res = compute_chunk(spec, j, threads=threads, on_progress=report.update)
+                # Batches within a chunk only where they are shown (the bar); otherwise one kernel call per chunk.
+                within = report.update if report.mode == "bar" else None
+                res = compute_chunk(spec, j, threads=threads, on_progress=within)
                 sink.write(res)
-                report.chunk_done(j, res["realizations"], counted=True)
+                report.chunk_done(j, res["realizations"], counted=within is not None)
         else:
             from distributed import as_completed
 
@@ -418,7 +420,7 @@ def _threads(threads):
 
 class _Progress:
     """Progress on stderr: a bar on a terminal or in a notebook, one line per chunk otherwise, nothing
-    when ``enabled`` is False. Local runs update it after every batch of a chunk's realisations."""
+    when ``enabled`` is False. Local runs update the bar after every batch of a chunk's realisations."""
 
     def __init__(self, spec, enabled: bool):
         self.spec, self.enabled = spec, bool(enabled)
