@@ -376,12 +376,6 @@ class RandomDecorated(_Decorated):
     def large_radii(self) -> np.ndarray:
         return np.ones(self.n_large)
 
-    def small_scale(self) -> np.ndarray:
-        return np.ones(self.n_large - 1)
-
-    def draw(self, rng) -> dict:
-        return {"small_radius": self.distribution.sample(rng, self.n_large - 1)}
-
     def describe(self) -> dict:
         return self._walled({"family": self.kind, "n_large": self.n_large, "distribution": self.distribution.describe(),
                              "n": self.n, "momentum_conserving": self.momentum_conserving})
