@@ -24,7 +24,7 @@ from .families import (
     family_from_dataset,
     family_from_record,
 )
-from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, EnsembleSpec, default_time_grid, run_ensemble
+from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, EnsembleSpec, default_time_grid, ensemble_integrator, run_ensemble
 from .units import Material, Scale, scale, to_physical  # physical units; the rest in granchain.units
 
 __all__ = [
@@ -37,6 +37,8 @@ __all__ = [
     "EFFECTIVE_VALIDITY_LIMIT",
     "ENSEMBLE_ATOL",
     "ENSEMBLE_RTOL",
+    "SMOOTH_ATOL",
+    "SMOOTH_RTOL",
     "EffectiveValidityWarning",
     "EnsembleSpec",
     "FAMILIES",
@@ -63,6 +65,7 @@ __all__ = [
     "draw_small_radii",
     "effective",
     "effective_parameters",
+    "ensemble_integrator",
     "family_from_dataset",
     "family_from_record",
     "from_radii",

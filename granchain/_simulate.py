@@ -8,7 +8,7 @@ import numpy as np
 
 from ._chain import Chain
 from ._integrators import RunControls, get_integrator
-from ._kernels._common import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END, total_energy, total_momentum
+from ._kernels._common import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END, final_energy, total_momentum
 from ._status import Status
 from ._validate import finite_scalar
 
@@ -33,6 +33,11 @@ class PulseResult:
     on ``t_grid`` (when a grid was requested), and ``wall_impulse`` = P_0 - P_end is the
     momentum the wall took (= the time integral of the wall force); momentum is then not
     conserved and ``momentum_error`` is NaN. Without a wall these are None.
+
+    ``positions``/``velocities`` are the final state. With a trailing window (``DP5(window_lag=...)``)
+    the granules that left it keep the velocity they left with and their positions are continued
+    ballistically (they may overlap: ``energy_error`` is computed from the energies they had when
+    they left, see ``granchain.DP5``).
     """
 
     chain: Chain
@@ -187,7 +192,7 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         warnings.warn(f"simulate: the integration did not succeed: {Status(status).name} ({Status(status).message}); "
                       "check result.status before using the peaks", RuntimeWarning, stacklevel=2)
     e0, p0 = chain.energy, chain.momentum
-    e1 = total_energy(x, v, chain.masses, chain.stiffness, chain.n)
+    e1 = final_energy(x, v, chain.masses, chain.stiffness, chain.n, info)
     p1 = total_momentum(v, chain.masses)
     wall = chain.wall
     return PulseResult(

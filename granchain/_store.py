@@ -749,6 +749,10 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
     if old != new:
         diff = ", ".join(f"{k}: stored {old.get(k)!r}, asked {new.get(k)!r}" for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k))
         hint = " (a store can be extended to more realisations, never shrunk)" if old.get("realizations") != new["realizations"] else ""
+        if old.get("integrator") != new.get("integrator") or old.get("chain_integrators") != new.get("chain_integrators"):
+            hint += (" (a store written with the exact DP5, every granule integrated to the end as before "
+                     "granchain 0.3, is resumed with integrator=granchain.DP5(1e-6, 1e-9), on the command line "
+                     "--error-control exact)")
         raise ValueError(f"{path} was written with different parameters ({diff}){hint}; "
                          "results are never mixed: use another path, or the stored parameters to resume")
     return int(stored_r)

@@ -74,10 +74,10 @@ def reference():
 def test_rows_are_simulate_of_the_rebuilt_chain(reference, key):
     family = FAMILIES[key]()
     ds = reference[key]
-    integ = ens.ensemble_integrator()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gc.EffectiveValidityWarning)
         for chain_name in family.chains:
+            integ = ens.ensemble_integrator(chain_name)  # each chain kind's default
             for i in (0, 5, R - 1):
                 res = gc.simulate(family.chain(SEED, i, chain_name), integ, t_grid=ds["time"].values)
                 row = ds.sel(chain=chain_name).isel(realization=i)
@@ -135,8 +135,10 @@ def test_random_decorated_stores_equal_the_v010_fixtures(tmp_path, fixture, fami
     grid = old["time"].values
     np.testing.assert_array_equal(grid, np.round(np.arange(0.0, 20.05, 0.5), 12))
     store = tmp_path / "new.zarr"
+    # 0.1.0 integrated every granule to the end: the exact DP5 at the ensembles' tolerances (since
+    # issue 9 the default adds a relaxed zone behind the pulse, which changes the last bits).
     new = gc.run_ensemble(family(), realizations=realizations, seed=seed, t_grid=grid, chunk_size=chunk_size, out=store,
-                          progress=False, threads=1)
+                          progress=False, threads=1, integrator=gc.DP5(1e-6, 1e-9))
     reread = xr.open_dataset(store, engine="zarr")
     # Variables added since 0.1.0 (peak contact forces) are extra; every old one is unchanged to the bit.
     assert set(old.data_vars) <= set(new.data_vars) == set(reread.data_vars)
@@ -189,7 +191,8 @@ def test_nearly_monodisperse_random_radii_carry_the_solitary_wave():
 def test_binary_limits_are_the_monodisperse_chains(p, radius):
     ds = gc.run_ensemble(gc.BinaryRandom(10, (1.0, 0.6), p), realizations=5, seed=2, chunk_size=5, progress=False)
     np.testing.assert_array_equal(ds["species"].values, np.full((5, 10), int(p)))
-    mono = gc.simulate(gc.from_radii(np.full(10, radius)), ens.ensemble_integrator(), t_grid=ds["time"].values)
+    mono = gc.simulate(gc.from_radii(np.full(10, radius)), ens.ensemble_integrator(ds["chain"].values[0]),
+                       t_grid=ds["time"].values)
     for i in range(5):
         np.testing.assert_array_equal(ds["peak_velocity"].values[0, i], mono.peak_velocity)
         np.testing.assert_array_equal(ds["peak_time"].values[0, i], mono.peak_time)

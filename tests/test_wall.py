@@ -166,7 +166,7 @@ def test_wall_family_ensemble_rows_are_simulate():
     from granchain._ensemble import ensemble_integrator
 
     for name in fam.chains:
-        res = gc.simulate(fam.chain(9, 3, name), ensemble_integrator(), t_grid=ds["time"].values)
+        res = gc.simulate(fam.chain(9, 3, name), ensemble_integrator(name), t_grid=ds["time"].values)
         row = ds.sel(chain=name).isel(realization=3)
         np.testing.assert_array_equal(row["peak_velocity"].values, res.peak_velocity)
         assert float(row["peak_wall_force"]) == res.peak_wall_force

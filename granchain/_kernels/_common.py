@@ -38,7 +38,9 @@ INFO_STEPS = 1  # accepted steps
 INFO_REJECTED = 2  # rejected steps
 INFO_EXIT = 3  # time the pulse left the last granule (-1: it did not)
 INFO_EVALUATIONS = 4  # force evaluations (whole-window sweeps)
-INFO_SIZE = 5
+INFO_WINDOW_START = 5  # first granule still integrated at the end (0-based; > 0 only with a trailing window)
+INFO_FROZEN_POTENTIAL = 6  # potential energy of the contacts behind the window when they left it
+INFO_SIZE = 7
 
 # Fast paths for the contact power delta^(n-1).
 POW_GENERAL = 0
@@ -111,6 +113,24 @@ def total_energy(x, v, m, c, n):
         if d > 0.0:
             e += c[j] / n * d**n
     return e
+
+
+@njit(**JIT)
+def final_energy(x, v, m, c, n, info):
+    """The energy a finished run reports: kinetic energy of every granule (granules behind a
+    trailing window keep the velocity they left it with), the potential of the contacts still
+    integrated (from granule ``info[INFO_WINDOW_START]`` on) at the end, and the potential the
+    contacts behind the window held when they left it (``info[INFO_FROZEN_POTENTIAL]``). The
+    contact across the window's edge was open when it was cut, so no energy is lost there; the
+    drift E_end - E_0 is then the integration error, granule by granule up to its exit from the
+    window. Without a window (start 0, nothing frozen) this is :func:`total_energy`, bit for bit."""
+    lo = int(info[INFO_WINDOW_START])
+    if lo == 0:
+        return total_energy(x, v, m, c, n)
+    e = info[INFO_FROZEN_POTENTIAL]
+    for k in range(lo):
+        e += 0.5 * m[k] * v[k] * v[k]
+    return e + total_energy(x[lo:], v[lo:], m[lo:], c[lo:], n)
 
 
 @njit(**JIT)
@@ -279,34 +299,43 @@ def is_new_peak(candidate, current, peak_rtol):
 
 
 @njit(**JIT)
-def final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t):
+def final_peaks(obs, lo, v, a, t, peak_rtol, peak_v, peak_t):
     """The velocity at the end of the run is a candidate if the granule is still speeding up
     (a > 0). A granule in free flight (a = 0) had its maximum located where its contact
     opened; its end velocity carries the error of the step across that kink of the force,
-    so it must not displace the located maximum."""
+    so it must not displace the located maximum.
+
+    ``v``, ``a`` hold the integrated granules lo.. (index k - lo for granule k); granules
+    behind a trailing window (k < lo) left it with their peaks final."""
     for q in range(obs.shape[0]):
-        if a[obs[q]] > 0.0 and is_new_peak(v[obs[q]], peak_v[q], peak_rtol):
-            peak_v[q] = v[obs[q]]
+        k = obs[q] - lo
+        if k >= 0 and a[k] > 0.0 and is_new_peak(v[k], peak_v[q], peak_rtol):
+            peak_v[q] = v[k]
             peak_t[q] = t
 
 
 @njit(**JIT)
-def final_force_peaks(x, v, c, n, pw, t, peak_rtol, peak_f, peak_ft):
+def final_force_peaks(x, v, c, n, pw, lo, t, peak_rtol, peak_f, peak_ft):
     """The force at the end of the run is a candidate for contacts still compressing
-    (delta > 0 and v_k - v_{k+1} > 0): their maximum lies beyond the run."""
+    (delta > 0 and v_k - v_{k+1} > 0): their maximum lies beyond the run.
+
+    ``x``, ``v``, ``c`` hold the integrated granules lo.. and their contacts (contact j of the
+    chain is entry j - lo); the contacts behind a trailing window have final peaks."""
     for j in range(x.shape[0] - 1):
         if v[j] - v[j + 1] > 0.0:
             f = contact_force(x[j] - x[j + 1], c[j], n, pw)
-            if f > 0.0 and is_new_peak(f, peak_f[j], peak_rtol):
-                peak_f[j] = f
-                peak_ft[j] = t
+            if f > 0.0 and is_new_peak(f, peak_f[lo + j], peak_rtol):
+                peak_f[lo + j] = f
+                peak_ft[lo + j] = t
 
 
 @njit(**JIT)
-def write_info(info, t, n_acc, n_rej, exit_since, n_eval):
+def write_info(info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential):
     """Fill the ``info`` record of a finished run (slots INFO_*)."""
     info[INFO_T_END] = t
     info[INFO_STEPS] = n_acc
     info[INFO_REJECTED] = n_rej
     info[INFO_EXIT] = exit_since
     info[INFO_EVALUATIONS] = n_eval
+    info[INFO_WINDOW_START] = lo
+    info[INFO_FROZEN_POTENTIAL] = frozen_potential

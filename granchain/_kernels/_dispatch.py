@@ -38,10 +38,12 @@ def integrate_chain(kernel, params, m, c, n, pw, obs, t_max, stop_at_exit, exit_
                     x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
     """Integrate one chain with kernel ``kernel`` and settings ``params`` (see the module doc).
 
-    DP5: params = [rtol, atol, first_step, fixed_step (0: adaptive)]; Verlet: params = [dt].
+    DP5: params = [rtol, atol, first_step, fixed_step (0: adaptive), relaxed_lag, relaxed_factor,
+    window_lag (lags 0: off)]; Verlet: params = [dt].
     """
     if kernel == KERNEL_DP5:
-        return dp5_integrate(m, c, n, pw, obs, params[0], params[1], params[2], params[3], t_max, stop_at_exit,
+        return dp5_integrate(m, c, n, pw, obs, params[0], params[1], params[2], params[3], int(params[4]), params[5],
+                             int(params[6]), t_max, stop_at_exit,
                              exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft,
                              grid_f, info)
     if kernel == KERNEL_VERLET:

@@ -40,6 +40,7 @@ from ._common import (
     is_finite_window,
     end_of_step,
     final_force_peaks,
+    has_wall,
     stop_time,
     write_info,
 )
@@ -230,17 +231,20 @@ def _stages(x, v, Kx, Kv, xs, vs, h, hi, c, inv_m, n, pw, F):
 
 
 @njit(**JIT)
-def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, rtol, atol, ratio):
-    """Max over components of |embedded error| / (atol + rtol max(|y|, |y_new|)); inf if the new state is not finite.
+def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
+    """Max over components of |embedded error| / (w_i (atol + rtol max(|y|, |y_new|))); inf if the new
+    state is not finite. w_i = ``factor`` for the granules of the relaxed zone (0..relaxed-1), else 1
+    (multiplying by 1 is exact: without a relaxed zone the norm is bitwise the plain one).
 
     The ratios go through the scratch array ``ratio`` so that the division loop
     vectorises; the maximum is taken in a second, cheap loop.
     """
     for i in range(hi):
+        w = factor if i < relaxed else 1.0
         ex = h * (E1 * Kx[0, i] + E3 * Kx[2, i] + E4 * Kx[3, i] + E5 * Kx[4, i] + E6 * Kx[5, i] + E7 * Kx[6, i])
         ev = h * (E1 * Kv[0, i] + E3 * Kv[2, i] + E4 * Kv[3, i] + E5 * Kv[4, i] + E6 * Kv[5, i] + E7 * Kv[6, i])
-        sx = atol + rtol * max(abs(x[i]), abs(xs[i]))
-        sv = atol + rtol * max(abs(v[i]), abs(vs[i]))
+        sx = (atol + rtol * max(abs(x[i]), abs(xs[i]))) * w
+        sv = (atol + rtol * max(abs(v[i]), abs(vs[i]))) * w
         ratio[i] = abs(ex) / sx
         ratio[hi + i] = abs(ev) / sv
     err = 0.0
@@ -254,7 +258,30 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, rtol, atol, ratio):
 
 
 @njit(**JIT)
-def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
+def _open_contact_behind(x, lo, target):
+    """The window start for a cut just behind granule ``target`` (0-based, in the chain): j + 1 for
+    the last contact j < target that is open now (x_j <= x_{j+1}; ``x`` holds the granules lo..),
+    or ``lo`` (no cut) if every contact between lo and target is closed."""
+    for j in range(target - 1, lo - 1, -1):
+        if x[j - lo] - x[j + 1 - lo] <= 0.0:
+            return j + 1
+    return lo
+
+
+@njit(**JIT)
+def _potential(x, c, n, first, last):
+    """Potential energy sum (c_j / n) delta_j^n of contacts first..last-1 (Eq. hertz-1)."""
+    e = 0.0
+    for j in range(first, last):
+        d = x[j] - x[j + 1]
+        if d > 0.0:
+            e += c[j] / n * d**n
+    return e
+
+
+@njit(**JIT)
+def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
+                  exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
     """Integrate one chain from the state (x, v) at t = 0.
 
     ``x``, ``v`` (length M) hold the initial state and receive the final one.
@@ -271,32 +298,55 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
     ends ``exit_margin`` after the pulse has left the last granule (and not
     before t_grid[-1]); otherwise at ``t_max``.
 
-    info receives [t_end, accepted steps, rejected steps, exit time, force evaluations].
+    Goal-oriented error control (``granchain.DP5``, issue 9; both off when <= 0, and always off
+    for a chain ending in a wall, whose pulse comes back). The *front* is the most advanced
+    observed granule whose velocity maximum has been located; it never moves backwards.
+    - ``relax_lag`` > 0: granules behind observed granule front - relax_lag enter the error norm
+      with tolerances ``relax_factor`` times looser (the relaxed zone).
+    - ``window_lag`` > 0: granules behind observed granule front - window_lag, cut across the
+      last contact behind it that is open at that moment, leave the integration (the trailing
+      window): they keep their velocity (positions continue ballistically), their peaks are final,
+      and the contact at the window's edge is dropped. Granules lo..M-1 stay integrated, so the
+      work per step is bounded by the window, not the chain.
+
+    info receives the INFO_* slots of ``_common`` (t_end, steps, rejected, exit time, force
+    evaluations, window start, potential energy of the frozen contacts).
     Returns the status code (granchain._kernels._common).
     """
     M = m.shape[0]
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
     inv_m = 1.0 / m
-    Kx = np.zeros((7, M))  # stage derivatives of x (= stage velocities)
-    Kv = np.zeros((7, M))  # stage derivatives of v (= stage accelerations)
+    Kx = np.zeros((7, M))  # stage derivatives of x (= stage velocities), window-local index
+    Kv = np.zeros((7, M))  # stage derivatives of v (= stage accelerations), window-local index
     xs = np.zeros(M)
     vs = np.zeros(M)
     F = np.zeros(M)
     Q = np.zeros(7)
     ratio = np.zeros(2 * M)
     peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
+    t_frozen = np.zeros(M)  # time each granule left the trailing window
 
+    # The window: granules lo..hi-1 are integrated. X, V, C, IM, MM are views from granule lo on
+    # (contiguous, so the stage loops vectorise); Kx, Kv are shifted to start at lo at each cut.
+    wall = has_wall(m)
+    goal = (relax_lag > 0 or window_lag > 0) and not wall
+    lo = 0
+    X, V, C, IM, MM = x[lo:], v[lo:], c[lo:], inv_m[lo:], m[lo:]
+    XS, VS = xs[lo:], vs[lo:]  # scratch of the window's length (the force routines read its length)
     hi = initial_window(x, v)
-    accelerations(x, c, inv_m, n, pw, hi, F, Kv[0])
+    accelerations(X, C, IM, n, pw, hi, F, Kv[0])
     for i in range(hi):
-        Kx[0, i] = v[i]
+        Kx[0, i] = V[i]
     n_eval = 1
+    front = -1  # observed granule (index into obs) of the front
+    relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
+    frozen_potential = 0.0
 
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    wall = initial_force_records(x, m, c, n, pw, g, peak_f, peak_ft, grid_f)
+    initial_force_records(x, m, c, n, pw, g, peak_f, peak_ft, grid_f)
 
     h = h_fixed if h_fixed > 0.0 else h_init
     err_old = 1e-4
@@ -314,14 +364,15 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
         if t + h >= t_stop:
             h = t_stop - t
             last = True
+        hw = hi - lo
         # Stages 2..7 (stage 7 is the new solution, reused as stage 1 next step).
-        _stages(x, v, Kx, Kv, xs, vs, h, hi, c, inv_m, n, pw, F)
+        _stages(X, V, Kx, Kv, XS, VS, h, hw, C, IM, n, pw, F)
         n_eval += 6
         # xs, vs now hold the 5th-order solution at t + h.
         accept = True
         err = 0.0
         if h_fixed <= 0.0:
-            err = _error_norm(x, v, xs, vs, Kx, Kv, h, hi, rtol, atol, ratio)
+            err = _error_norm(X, V, XS, VS, Kx, Kv, h, hw, relaxed, relax_factor, rtol, atol, ratio)
             if not math.isfinite(err):
                 status = NONFINITE
                 break
@@ -335,68 +386,91 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
 
         # Accepted: peaks and grid samples from the dense output over [t, t + h].
         for q in range(n_obs):
-            k = obs[q]
-            if k >= hi:
+            k = obs[q] - lo
+            if k < 0 or k >= hw:
                 continue
             a0 = Kv[0, k]
             a1 = Kv[6, k]
             if a0 > 0.0 and a1 <= 0.0:
-                theta = _first_root(ROOT_ACCELERATION, k, a0, a1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q)
+                theta = _first_root(ROOT_ACCELERATION, k, a0, a1, X, V, Kx, Kv, h, C, IM, n, pw, Q)
                 dense_weights(theta, Q)
-                vp = dense_value(v[k], Kv, k, h, Q)
+                vp = dense_value(V[k], Kv, k, h, Q)
                 if is_new_peak(vp, peak_v[q], peak_rtol):
                     peak_v[q] = vp
                     peak_t[q] = t + theta * h
+                front = max(front, q)
         # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -.
         # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
-        for j in range(hi - 1):
+        for j in range(hw - 1):
             w0 = Kx[0, j] - Kx[0, j + 1]
             w1 = Kx[6, j] - Kx[6, j + 1]
             if (w0 > 0.0) & (w1 <= 0.0):
                 # Screen: the cubic Hermite estimate of the compression maximum from the step ends
                 # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
-                d0 = x[j] - x[j + 1]
-                d1 = xs[j] - xs[j + 1]
-                if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[j]:
+                d0 = X[j] - X[j + 1]
+                d1 = XS[j] - XS[j + 1]
+                if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
                     continue
-                theta = _first_root(ROOT_APPROACH, j, w0, w1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q)
+                theta = _first_root(ROOT_APPROACH, j, w0, w1, X, V, Kx, Kv, h, C, IM, n, pw, Q)
                 dense_weights(theta, Q)
-                dp = _dense_compression(j, x, Kx, h, Q)
-                fp = contact_force(dp, c[j], n, pw)  # Eq. (motion_rescaled): c_j delta^(n-1)
-                if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
-                    peak_f[j] = fp
-                    peak_ft[j] = t + theta * h
-                    peak_d[j] = dp
+                dp = _dense_compression(j, X, Kx, h, Q)
+                fp = contact_force(dp, C[j], n, pw)  # Eq. (motion_rescaled): c_j delta^(n-1)
+                if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
+                    peak_f[lo + j] = fp
+                    peak_ft[lo + j] = t + theta * h
+                    peak_d[lo + j] = dp
         while g < n_grid and t_grid[g] <= t + h:
             theta = (t_grid[g] - t) / h
             dense_weights(theta, Q)
             for q in range(n_obs):
-                k = obs[q]
-                grid_v[g, q] = dense_value(v[k], Kv, k, h, Q) if k < hi else 0.0
+                k = obs[q] - lo
+                if k < 0:  # behind the window: the velocity it left with
+                    grid_v[g, q] = v[obs[q]]
+                else:
+                    grid_v[g, q] = dense_value(V[k], Kv, k, h, Q) if k < hw else 0.0
             if wall:
-                grid_f[g] = contact_force(_dense_compression(M - 2, x, Kx, h, Q), c[M - 2], n, pw) if M - 2 < hi else 0.0
+                grid_f[g] = contact_force(_dense_compression(M - 2 - lo, X, Kx, h, Q), C[M - 2 - lo], n, pw) if M - 2 < hi else 0.0
             g += 1
 
-        for i in range(hi):
-            x[i] = xs[i]
-            v[i] = vs[i]
+        for i in range(hw):
+            X[i] = XS[i]
+            V[i] = VS[i]
             Kx[0, i] = Kx[6, i]
             Kv[0, i] = Kv[6, i]
         t = t + h if not last else t_stop
         n_acc += 1
-        if h_fixed > 0.0 and not is_finite_window(x, v, hi):  # adaptive: checked in the error norm
+        if h_fixed > 0.0 and not is_finite_window(X, V, hw):  # adaptive: checked in the error norm
             status = NONFINITE
             break
         if hi < M:
-            new_hi = advance_window(x, v, hi)
+            new_hi = lo + advance_window(X, V, hw)
             if new_hi > hi:
                 hi = new_hi
-                accelerations(x, c, inv_m, n, pw, hi, F, Kv[0])
-                for i in range(hi):
-                    Kx[0, i] = v[i]
+                accelerations(X, C, IM, n, pw, hi - lo, F, Kv[0])
+                for i in range(hi - lo):
+                    Kx[0, i] = V[i]
                 n_eval += 1
+        if goal and front >= 0:
+            if window_lag > 0 and front >= window_lag:
+                new_lo = _open_contact_behind(X, lo, obs[front - window_lag])
+                if new_lo > lo:
+                    # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
+                    # contacts among them (the contact at the new edge is open), their exit time.
+                    d = new_lo - lo
+                    frozen_potential += _potential(X, C, n, 0, d - 1)
+                    for i in range(d):
+                        t_frozen[lo + i] = t
+                    for s in range(7):
+                        for i in range(hi - new_lo):
+                            Kx[s, i] = Kx[s, i + d]
+                            Kv[s, i] = Kv[s, i + d]
+                    lo = new_lo
+                    X, V, C, IM, MM = x[lo:], v[lo:], c[lo:], inv_m[lo:], m[lo:]
+                    XS, VS = xs[lo:], vs[lo:]
+            if relax_lag > 0 and front >= relax_lag:
+                relaxed = max(0, obs[front - relax_lag] - lo)
 
-        status, exit_since = end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed)
+        status, exit_since = end_of_step(X, V, MM, hi - lo, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed)
         if status >= 0:
             break
 
@@ -406,7 +480,9 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, t_max, stop_at_
             h *= fac
             err_old = max(err, 1e-4)
 
-    final_peaks(obs, v, Kv[0], t, peak_rtol, peak_v, peak_t)
-    final_force_peaks(x, v, c, n, pw, t, peak_rtol, peak_f, peak_ft)
-    write_info(info, t, n_acc, n_rej, exit_since, n_eval)
+    final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
+    final_force_peaks(X, V, C, n, pw, lo, t, peak_rtol, peak_f, peak_ft)
+    for k in range(lo):  # the granules behind the window continued ballistically
+        x[k] += v[k] * (t - t_frozen[k])
+    write_info(info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential)
     return status

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._aligned import accumulate_aligned
-from ._common import INFO_SIZE, INFO_STEPS, INFO_T_END, SUCCESS, has_wall, total_energy
+from ._common import INFO_SIZE, INFO_STEPS, INFO_T_END, SUCCESS, final_energy, has_wall
 from ._dispatch import integrate_chain
 from ._jit import JIT, JIT_PARALLEL
 
@@ -104,7 +104,7 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, conta
         n_steps[r] = np.int64(info[INFO_STEPS])
         t_end[r] = info[INFO_T_END]
         e0 = 0.5 * m[0] * v_init[r] * v_init[r]  # the same expression as Chain.energy
-        e1 = total_energy(x, v, m, c, n)
+        e1 = final_energy(x, v, m, c, n, info)
         energy_error[r] = (e1 - e0) / e0
         if st == SUCCESS:
             cnt[tid] += 1

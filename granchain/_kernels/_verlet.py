@@ -137,7 +137,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
         status, exit_since = end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed)
         if status >= 0:
             break
-    final_peaks(obs, v, a, t, peak_rtol, peak_v, peak_t)
-    final_force_peaks(x, v, c, n, pw, t, peak_rtol, peak_f, peak_ft)
-    write_info(info, t, n_acc, 0, exit_since, n_eval)
+    final_peaks(obs, 0, v, a, t, peak_rtol, peak_v, peak_t)
+    final_force_peaks(x, v, c, n, pw, 0, t, peak_rtol, peak_f, peak_ft)
+    write_info(info, t, n_acc, 0, exit_since, n_eval, 0, 0.0)
     return status

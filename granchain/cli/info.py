@@ -78,11 +78,23 @@ def summary(path: str) -> dict:
     if isinstance(holder, dict) and not holder.get("released"):
         writing = holder
     done_r = sum(min((j + 1) * cs, R) - j * cs for j in np.flatnonzero(done == 1))
-    return {"store": path, "family": params["family"], "integrator": params["integrator"], "realizations": R,
+    return {"store": path, "family": params["family"], "integrator": params["integrator"],
+            "chain_integrators": params.get("chain_integrators"), "realizations": R,
             "seed": params["seed"], "chains": params["chains"], "chunk_size": cs, "chunks_done": int((done == 1).sum()),
             "chunks": n_chunks, "realizations_done": int(done_r), "complete": bool((done == 1).all()),
             "damaged_chunks": damaged, "failed_integrations": failures, "status_counts": status_counts,
             "size_bytes": _size(path), "lock": writing, "granchain_version": params.get("granchain_version")}
+
+
+def _integrator_lines(integ: dict, per_chain: dict | None) -> list:
+    """One line for the integrator, or one per chain kind when the kinds have their own."""
+    def line(label, record):
+        record = dict(record)
+        return f"{label:<12} {record.pop('name', '?')}: " + ", ".join(f"{k}={v}" for k, v in sorted(record.items()))
+
+    if not per_chain:
+        return [line("integrator", integ)]
+    return [line("integrator" if i == 0 else "", r) + f"  ({kind} chains)" for i, (kind, r) in enumerate(per_chain.items())]
 
 
 def run(args) -> int:
@@ -97,7 +109,7 @@ def run(args) -> int:
     lines = [
         f"store        {info['store']} ({_human(info['size_bytes'])} on disk, granchain {info['granchain_version']})",
         f"family       {fam.pop('family', '?')}: " + ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(fam.items())),
-        f"integrator   {integ.pop('name', '?')}: " + ", ".join(f"{k}={v}" for k, v in sorted(integ.items())),
+        *_integrator_lines(integ, info.get("chain_integrators")),
         f"run          {info['realizations']} realisations, seed {info['seed']}, chains {', '.join(info['chains'])}, "
         f"chunks of {info['chunk_size']}",
         f"progress     {info['chunks_done']}/{info['chunks']} chunks done ({info['realizations_done']} realisations)"

@@ -1,0 +1,131 @@
+"""Goal-oriented error control (issue 9): CPU cost of DP5's relaxed zone and trailing window.
+
+Baseline, measured in the same run: the exact DP5 at the ensembles' tolerances
+(``DP5(1e-6, 1e-9)``, every granule integrated to the end with the full tolerance: the
+ensemble default before issue 9). Compared:
+
+- ``relaxed``  = ``DP5.relaxed()``, the ensemble default for decorated chains now (accuracy
+  contract: peaks and the averaged pulse, tests/test_window.py; effective chains default to the same
+  at rtol 5e-8, ``granchain.ensemble_integrator``);
+- ``windowed`` = ``DP5.windowed()``, relaxed zone plus trailing window (peaks contract; the averaged
+  pulse's tail is not kept, see ``granchain.DP5``).
+
+1. CPU-seconds per decorated realisation at N = 26 (``run_ensemble``, decorated chains, default time
+   grid), 1 and 2 Numba threads; CPU time = process time (all threads), best of ``--repeat``,
+   the three integrators measured alternately.
+2. Scaling: CPU-ms per decorated realisation at N = 26, 51, 101 (``--scaling`` realisations each,
+   one thread), and cost(101) / cost(26) (target <= 4.5: linear in N).
+3. The paper's data set (``granchain reproduce`` defaults: 30,000 realisations of both chains at
+   N = 6, 11, 16, 26), estimated from wall-clock rates at all threads, with the ensemble defaults
+   (per chain kind) and with the exact baseline (target <= 5 minutes).
+
+    python benchmarks/bench_window.py            # a few minutes
+    python benchmarks/bench_window.py --quick    # smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numba
+
+import granchain as gc
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_simulate import machine  # noqa: E402
+
+INTEGRATORS = {
+    "exact": lambda: gc.DP5(1e-6, 1e-9),
+    "relaxed": gc.DP5.relaxed,
+    "windowed": gc.DP5.windowed,
+}
+PAPER_SIZES = (6, 11, 16, 26)
+PAPER_REALIZATIONS = 30_000
+TARGET_SPEEDUP = 2.5
+TARGET_SCALING = 4.5
+TARGET_PAPER = 300.0
+
+
+def run(n_large, realizations, integrator, chains="decorated", threads=None, seed=0):
+    """(CPU seconds, wall seconds, failed realisations, mean accepted steps) of one ensemble."""
+    c0, w0 = time.process_time(), time.perf_counter()
+    ds = gc.run_ensemble(gc.RandomDecorated(n_large), realizations=realizations, seed=seed, chains=chains,
+                         integrator=integrator, threads=threads, progress=False, chunk_size=max(realizations, 1))
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    return cpu, wall, int((ds["status"] != 0).sum()), float(ds["n_steps"].mean())
+
+
+def best(n_large, realizations, threads, repeat):
+    """Best-of-``repeat`` CPU seconds per integrator, measured alternately."""
+    out = {name: None for name in INTEGRATORS}
+    for _ in range(repeat):
+        for name, make in INTEGRATORS.items():
+            cpu, wall, failed, steps = run(n_large, realizations, make(), threads=threads)
+            if out[name] is None or cpu < out[name][0]:
+                out[name] = (cpu, wall, failed, steps)
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="small sizes (a smoke run, numbers not meaningful)")
+    p.add_argument("--realizations", type=int, default=96, help="decorated realisations at N = 26 (part 1)")
+    p.add_argument("--scaling", type=int, default=12, help="realisations per size in part 2")
+    p.add_argument("--repeat", type=int, default=2)
+    args = p.parse_args(argv)
+    if args.quick:
+        args.realizations, args.scaling, args.repeat = 8, 2, 1
+    print(machine())
+    for make in INTEGRATORS.values():  # compile once, outside the timings
+        run(6, 2, make(), chains="both")
+
+    print(f"\n1. CPU-ms per decorated realisation, N = 26, {args.realizations} realisations, best of {args.repeat} "
+          "(baseline: exact DP5(1e-6, 1e-9), same run)")
+    print(f"{'threads':>7} {'integrator':>10} {'CPU-ms':>8} {'steps':>8} {'failed':>6} {'speed-up':>9}")
+    verdicts = []
+    for threads in (1, 2):
+        res = best(26, args.realizations, threads, args.repeat)
+        base = res["exact"][0]
+        for name, (cpu, wall, failed, steps) in res.items():
+            print(f"{threads:7d} {name:>10} {1000 * cpu / args.realizations:8.2f} {steps:8.0f} {failed:6d} {base / cpu:8.2f}x")
+        for name in ("relaxed", "windowed"):
+            ratio = base / res[name][0]
+            verdicts.append(f"{'PASS' if ratio >= TARGET_SPEEDUP else 'MISS'}  {name}, {threads} thread(s): "
+                            f"{ratio:.2f}x fewer CPU-seconds than exact DP5 (target >= {TARGET_SPEEDUP}x, aim 4x)")
+
+    print(f"\n2. Scaling: CPU-ms per decorated realisation, {args.scaling} realisations per size, 1 thread")
+    sizes = (26, 51, 101)
+    print(f"{'integrator':>10} " + " ".join(f"{'N = ' + str(n):>10}" for n in sizes) + f" {'101/26':>8}")
+    for name, make in INTEGRATORS.items():
+        costs = [run(n, args.scaling, make(), threads=1)[0] / args.scaling for n in sizes]
+        ratio = costs[-1] / costs[0]
+        print(f"{name:>10} " + " ".join(f"{1000 * c:10.1f}" for c in costs) + f" {ratio:8.1f}")
+        if name != "exact":
+            verdicts.append(f"{'PASS' if ratio <= TARGET_SCALING else 'MISS'}  {name}: cost(101)/cost(26) = {ratio:.1f} "
+                            f"(target <= {TARGET_SCALING}; exact: see the table)")
+
+    threads = numba.config.NUMBA_NUM_THREADS
+    print(f"\n3. The paper's set ({PAPER_REALIZATIONS} realisations x both chains x N = {PAPER_SIZES}), "
+          f"estimated from wall-clock rates at {threads} threads")
+    sample = {"decorated": max(args.realizations, 8), "effective": 10 * max(args.realizations, 8)}
+    for name in ("exact", "default"):
+        total = 0.0
+        parts = []
+        for n in PAPER_SIZES:
+            for kind, count in sample.items():
+                wall = run(n, count, INTEGRATORS["exact"]() if name == "exact" else None, chains=kind)[1]
+                total += PAPER_REALIZATIONS * wall / count
+                parts.append(f"{kind[:3]} N={n}: {PAPER_REALIZATIONS * wall / count:5.0f} s")
+        print(f"{name:>10}: {total / 60:5.1f} min  ({'; '.join(parts)})")
+        if name == "default":
+            verdicts.append(f"{'PASS' if total <= TARGET_PAPER else 'MISS'}  paper set with the ensemble defaults: "
+                            f"{total / 60:.1f} min estimated (target <= {TARGET_PAPER / 60:.0f} min)")
+    print()
+    print("\n".join(verdicts))
+
+
+if __name__ == "__main__":
+    main()
