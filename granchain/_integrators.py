@@ -33,8 +33,10 @@ __all__ = ["Integrator", "DP5", "Verlet", "VerletStabilityWarning", "verlet_omeg
 
 
 #: Validated goal-oriented settings of :meth:`DP5.relaxed` and :meth:`DP5.windowed` (lags counted in
-#: observed granules behind the front; tests/test_window.py).
-RELAXED_LAG = 3
+#: observed granules behind the front; tests/test_window.py). A relaxed lag of 3 broke the contract
+#: at the last granule, where the pulse piles up against the free end, in 2 of 120,000 decorated
+#: realisations of the paper's set (2.3e-6 and 1.3e-6 from DOP853); 4 keeps them within 1.2e-7.
+RELAXED_LAG = 4
 RELAXED_FACTOR = 1000.0
 WINDOW_LAG = 7
 
@@ -282,7 +284,7 @@ class DP5(_Compiled):
 
     @classmethod
     def relaxed(cls, rtol: float = 1e-6, atol: float = 1e-9) -> "DP5":
-        """DP5 with the validated relaxed zone (the ensembles' default): granules more than 3
+        """DP5 with the validated relaxed zone (the ensembles' default): granules more than 4
         observed granules behind the front at 1000 times looser tolerances; every granule
         integrated to the end (``RELAXED_LAG``, ``RELAXED_FACTOR`` in ``granchain._integrators``)."""
         return cls(rtol, atol, relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)

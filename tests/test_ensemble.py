@@ -386,7 +386,7 @@ def test_every_variable_is_described(local):
     assert params["family"]["n_large"] == N == local.attrs["n_large"]
     integrator = json.loads(local.attrs["granchain_integrator"])
     assert integrator == params["integrator"] == {"name": "dp5", "rtol": gc.ENSEMBLE_RTOL, "atol": gc.ENSEMBLE_ATOL,
-                                                   "first_step": 1e-3, "fixed_step": None, "relaxed_lag": 3,
+                                                   "first_step": 1e-3, "fixed_step": None, "relaxed_lag": 4,
                                                    "relaxed_factor": 1000.0, "window_lag": None}
     assert local.attrs["rtol"] == gc.ENSEMBLE_RTOL and local.attrs["integrator"] == "dp5"
     assert local.attrs["granchain_version"] == gc.__version__
