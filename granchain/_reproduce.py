@@ -18,6 +18,7 @@ from . import __version__, analysis
 from ._distributions import Uniform
 from ._ensemble import default_time_grid, run_ensemble
 from ._report import Record, build_records, markdown_table
+from ._store import stored_record
 
 PAPER_N = (6, 11, 16, 26)
 CITATION = ("U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg, "
@@ -101,7 +102,7 @@ def _find(records, prefix):
 
 def _stored_integrators(ds) -> dict:
     """{chain kind: integrator record} of a store (one record for every kind unless they differ)."""
-    params = json.loads(ds.attrs["granchain_parameters"])
+    params = stored_record(ds, "parameters")
     return params.get("chain_integrators") or {kind: params["integrator"] for kind in params["chains"]}
 
 

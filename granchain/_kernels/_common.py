@@ -108,7 +108,14 @@ def total_energy(x, v, m, c, n):
     for k in range(M):
         if m[k] < math.inf:
             e += 0.5 * m[k] * v[k] * v[k]
-    for j in range(M - 1):
+    return add_potential(e, x, c, n, 0, M - 1)
+
+
+@njit(**JIT)
+def add_potential(e, x, c, n, first, last):
+    """e + the potential energy (c_j / n) delta_j^n of contacts first..last-1 (Eq. hertz-1), added
+    one contact at a time (the order :func:`total_energy` has always summed in)."""
+    for j in range(first, last):
         d = x[j] - x[j + 1]
         if d > 0.0:
             e += c[j] / n * d**n

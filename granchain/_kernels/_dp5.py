@@ -30,6 +30,7 @@ from ._common import (
     NONFINITE,
     STEP_UNDERFLOW,
     accelerations,
+    add_potential,
     advance_window,
     contact_force,
     final_peaks,
@@ -269,17 +270,6 @@ def _open_contact_behind(x, lo, target):
 
 
 @njit(**JIT)
-def _potential(x, c, n, first, last):
-    """Potential energy sum (c_j / n) delta_j^n of contacts first..last-1 (Eq. hertz-1)."""
-    e = 0.0
-    for j in range(first, last):
-        d = x[j] - x[j + 1]
-        if d > 0.0:
-            e += c[j] / n * d**n
-    return e
-
-
-@njit(**JIT)
 def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
                   exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
     """Integrate one chain from the state (x, v) at t = 0.
@@ -457,7 +447,7 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, rela
                     # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
                     # contacts among them (the contact at the new edge is open), their exit time.
                     d = new_lo - lo
-                    frozen_potential += _potential(X, C, n, 0, d - 1)
+                    frozen_potential = add_potential(frozen_potential, X, C, n, 0, d - 1)
                     for i in range(d):
                         t_frozen[lo + i] = t
                     for s in range(7):

@@ -105,11 +105,10 @@ def run(args) -> int:
         print(json.dumps(info, indent=1, sort_keys=True))
         return 0
     fam = dict(info["family"])
-    integ = dict(info["integrator"])
     lines = [
         f"store        {info['store']} ({_human(info['size_bytes'])} on disk, granchain {info['granchain_version']})",
         f"family       {fam.pop('family', '?')}: " + ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(fam.items())),
-        *_integrator_lines(integ, info.get("chain_integrators")),
+        *_integrator_lines(info["integrator"], info.get("chain_integrators")),
         f"run          {info['realizations']} realisations, seed {info['seed']}, chains {', '.join(info['chains'])}, "
         f"chunks of {info['chunk_size']}",
         f"progress     {info['chunks_done']}/{info['chunks']} chunks done ({info['realizations_done']} realisations)"
