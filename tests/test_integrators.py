@@ -129,3 +129,48 @@ def test_dp5_error_follows_rtol():
         assert err < 50 * rtol, (rtol, err)
         errs.append(err)
     assert errs[0] > errs[1] > errs[2]
+
+
+# -- DP5 kernel pieces ---------------------------------------------------------------------------
+@pytest.mark.parametrize("where", [0, 1, 5, 40, 99])
+def test_dp5_error_norm_keeps_a_nan(where):
+    """A NaN ratio anywhere makes the error norm infinite (the step is refused as non-finite), also when
+    finite ratios follow it (the max loop once let a later finite ratio overwrite the NaN); with all
+    ratios finite the norm is their maximum, whatever the accumulator that holds it."""
+    from granchain._kernels._dp5 import _error_norm
+
+    hi = 50
+    rng = np.random.default_rng(where)
+    x, v, xs, vs = (rng.random(hi) for _ in range(4))
+    Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
+    ratio = np.zeros(2 * hi)
+    err = _error_norm(x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
+    assert err == ratio.max() and math.isfinite(err)
+    (Kx if where < hi else Kv)[3, where % hi] = np.nan
+    assert _error_norm(x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == math.inf
+    assert np.isnan(ratio[where]) and np.isfinite(np.delete(ratio, where)).all()
+
+
+def test_borrowed_views_share_memory():
+    """The DP5 step loop runs on borrowed views (no reference counting): they must be views of the
+    very arrays the caller passed, so the kernel's writes reach them."""
+    from numba import njit
+
+    from granchain._kernels._common import borrowed, keep_alive
+
+    @njit
+    def fill(a, b):
+        owned = np.zeros(3)
+        va, vb, vo = borrowed(a), borrowed(b), borrowed(owned)
+        for i in range(a.shape[0]):
+            va[i] = 2.0 * i
+        vb[1, 2] = 7.0
+        vo[1] = 5.0
+        total = vo.sum()
+        keep_alive(owned)
+        return total
+
+    a, b = np.zeros(4), np.zeros((2, 3))
+    assert fill(a, b) == 5.0
+    np.testing.assert_array_equal(a, [0.0, 2.0, 4.0, 6.0])
+    assert b[1, 2] == 7.0 and b.sum() == 7.0

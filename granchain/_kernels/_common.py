@@ -25,9 +25,11 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+import numba
+from numba import njit, types
+from numba.extending import intrinsic, overload
 
-from ._jit import JIT
+from ._jit import JIT, JIT_INLINE
 
 # Status codes of one integration: defined with their messages in plain Python (granchain._status).
 from .._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX  # noqa: E402,F401
@@ -41,6 +43,44 @@ INFO_EVALUATIONS = 4  # force evaluations (whole-window sweeps)
 INFO_WINDOW_START = 5  # first granule still integrated at the end (0-based; > 0 only with a trailing window)
 INFO_FROZEN_POTENTIAL = 6  # potential energy of the contacts behind the window when they left it
 INFO_SIZE = 7
+
+
+@intrinsic
+def _data_pointer(typingctx, arr):
+    """The data pointer of an array (for :func:`borrowed`)."""
+    sig = types.CPointer(arr.dtype)(arr)
+
+    def codegen(context, builder, signature, args):
+        return context.make_array(signature.args[0])(context, builder, args[0]).data
+
+    return sig, codegen
+
+
+def borrowed(a):
+    """A view of ``a`` that does not own its memory (compiled: ``numba.carray`` on its data pointer), so
+    that passing it to a function costs no reference counting. Numba passes every owning array with an
+    atomic increment and decrement of its reference count (NRT); in DP5's step loop, whose helpers see a
+    dozen arrays every step, that was half of the run time (profiled with perf).
+
+    The caller must keep ``a`` alive for as long as the view is used (:func:`keep_alive`); the
+    arguments of a function are kept alive by its caller. Plain Python (``NUMBA_DISABLE_JIT``): ``a``."""
+    return a
+
+
+@overload(borrowed, jit_options=JIT)
+def _borrowed_compiled(a):
+    def impl(a):
+        return numba.carray(_data_pointer(a), a.shape)
+
+    return impl
+
+
+@njit(**JIT)
+def keep_alive(*arrays):
+    """Does nothing: a use of ``arrays`` after the last use of their :func:`borrowed` views, so that
+    Numba releases them only after that."""
+    return None
+
 
 # Fast paths for the contact power delta^(n-1).
 POW_GENERAL = 0
@@ -70,23 +110,26 @@ def contact_force(d, c, n, pw):
     return c * d ** (n - 1.0)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def accelerations(x, c, inv_m, n, pw, hi, F, a):
-    """a_k for k < hi (Eq. motion_rescaled); F is scratch for the contact forces."""
+    """a_k for k < hi (Eq. motion_rescaled).
+
+    ``F`` is scratch of length >= hi + 1: F[j + 1] receives the force of contact j, and F[0] (the free
+    end) and F[hi] past the last granule (when hi = M) are set to 0, so that a_k = (F[k] - F[k + 1]) / m_k
+    for every k, the chain's ends included, in one loop that vectorises."""
     M = x.shape[0]
     nc = min(hi, M - 1)  # contacts 0..nc-1; contact hi-1 touches the resting granule hi
+    F[0] = 0.0
+    F[hi] = 0.0  # overwritten below by contact hi - 1 unless hi = M
     if pw == POW_HERTZ:  # branch-free so that the loop vectorises (SIMD sqrt)
         for j in range(nc):
             d = max(x[j] - x[j + 1], 0.0)
-            F[j] = c[j] * d * math.sqrt(d)
+            F[j + 1] = c[j] * d * math.sqrt(d)
     else:
         for j in range(nc):
-            F[j] = contact_force(x[j] - x[j + 1], c[j], n, pw)
-    left = 0.0
+            F[j + 1] = contact_force(x[j] - x[j + 1], c[j], n, pw)
     for k in range(hi):
-        right = F[k] if k < nc else 0.0
-        a[k] = (left - right) * inv_m[k]
-        left = right
+        a[k] = (F[k] - F[k + 1]) * inv_m[k]
 
 
 @njit(**JIT)
@@ -160,7 +203,7 @@ def initial_window(x, v):
     return min(M, last + 1 + WINDOW_MARGIN)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def advance_window(x, v, hi):
     """New window end: WINDOW_MARGIN past the last granule that moved (never shrinks)."""
     M = x.shape[0]
@@ -175,7 +218,7 @@ def advance_window(x, v, hi):
 RATTLER_MASS_RATIO = 0.1
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def pulse_has_left(x, v, m):
     """The pulse has left the chain through its last granule.
 
@@ -201,13 +244,13 @@ def pulse_has_left(x, v, m):
     return True
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def has_wall(m):
     """The last granule is a rigid wall (infinite mass)."""
     return m[m.shape[0] - 1] == math.inf
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def wall_released(x, v):
     """The pulse has come back from the wall: the wall contact is open and the granule
     next to the wall moves away from it (v < 0). The run ends ``exit_margin`` after this
@@ -217,7 +260,7 @@ def wall_released(x, v):
     return x[M - 2] - x[M - 1] <= 0.0 and v[M - 2] < 0.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def pulse_is_out(x, v, m):
     """The stop condition: :func:`wall_released` with a wall, else :func:`pulse_has_left`."""
     if has_wall(m):
@@ -225,7 +268,7 @@ def pulse_is_out(x, v, m):
     return pulse_has_left(x, v, m)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed):
     """Bookkeeping after an accepted step: (status, or -1 to go on; updated exit_since).
 
@@ -246,7 +289,7 @@ def end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_
     return -1, exit_since
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def stop_time(t_max, exit_since, exit_margin, t_needed):
     """Where the run must end: exit_margin after the exit (not before t_needed), at most t_max."""
     if exit_since < 0.0:
@@ -254,7 +297,7 @@ def stop_time(t_max, exit_since, exit_margin, t_needed):
     return min(t_max, max(exit_since + exit_margin, t_needed))
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def is_finite_window(x, v, hi):
     for k in range(hi):
         if not (math.isfinite(x[k]) and math.isfinite(v[k])):

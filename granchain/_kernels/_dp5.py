@@ -32,12 +32,14 @@ from ._common import (
     accelerations,
     add_potential,
     advance_window,
+    borrowed,
     contact_force,
     final_peaks,
     is_new_peak,
     initial_force_records,
     initial_records,
     initial_window,
+    keep_alive,
     is_finite_window,
     end_of_step,
     final_force_peaks,
@@ -45,7 +47,7 @@ from ._common import (
     stop_time,
     write_info,
 )
-from ._jit import JIT
+from ._jit import JIT, JIT_INLINE
 
 ORDER = 5
 
@@ -197,7 +199,7 @@ B1, B3, B4, B5, B6 = A[6, 0], A[6, 2], A[6, 3], A[6, 4], A[6, 5]
 E1, E3, E4, E5, E6, E7 = E[0], E[2], E[3], E[4], E[5], E[6]
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def _stages(x, v, Kx, Kv, xs, vs, h, hi, c, inv_m, n, pw, F):
     """Stages 2..7 of one step over granules 0..hi-1, unrolled.
 
@@ -231,14 +233,16 @@ def _stages(x, v, Kx, Kv, xs, vs, h, hi, c, inv_m, n, pw, F):
     accelerations(xs, c, inv_m, n, pw, hi, F, Kv[6])
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
     """Max over components of |embedded error| / (w_i (atol + rtol max(|y|, |y_new|))); inf if the new
     state is not finite. w_i = ``factor`` for the granules of the relaxed zone (0..relaxed-1), else 1
     (multiplying by 1 is exact: without a relaxed zone the norm is bitwise the plain one).
 
-    The ratios go through the scratch array ``ratio`` so that the division loop
-    vectorises; the maximum is taken in a second, cheap loop.
+    The ratios go through the scratch array ``ratio`` so that the division loop vectorises. The
+    maximum is then taken with four independent accumulators (the max is exact, so the order does
+    not change it; one accumulator is a chain of dependent compares), each keeping a NaN once it
+    has seen one: a NaN ratio (a non-finite state) must not be overwritten by a later finite one.
     """
     for i in range(hi):
         w = factor if i < relaxed else 1.0
@@ -248,14 +252,23 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
         sv = (atol + rtol * max(abs(v[i]), abs(vs[i]))) * w
         ratio[i] = abs(ex) / sx
         ratio[hi + i] = abs(ev) / sv
-    err = 0.0
-    for i in range(2 * hi):
-        r = ratio[i]
-        if not r <= err:  # also catches NaN (a non-finite state)
-            err = r
-    if not math.isfinite(err):
+    e0 = e1 = e2 = e3 = 0.0
+    n2 = 2 * hi
+    i = 0
+    while i + 4 <= n2:
+        r0, r1, r2, r3 = ratio[i], ratio[i + 1], ratio[i + 2], ratio[i + 3]
+        e0 = r0 if (r0 > e0 or r0 != r0) else e0
+        e1 = r1 if (r1 > e1 or r1 != r1) else e1
+        e2 = r2 if (r2 > e2 or r2 != r2) else e2
+        e3 = r3 if (r3 > e3 or r3 != r3) else e3
+        i += 4
+    while i < n2:
+        r0 = ratio[i]
+        e0 = r0 if (r0 > e0 or r0 != r0) else e0
+        i += 1
+    if not (math.isfinite(e0) and math.isfinite(e1) and math.isfinite(e2) and math.isfinite(e3)):
         return math.inf
-    return err
+    return max(max(e0, e1), max(e2, e3))
 
 
 @njit(**JIT)
@@ -304,18 +317,39 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, rela
     Returns the status code (granchain._kernels._common).
     """
     M = m.shape[0]
-    n_obs = obs.shape[0]
-    n_grid = t_grid.shape[0]
     inv_m = 1.0 / m
     Kx = np.zeros((7, M))  # stage derivatives of x (= stage velocities), window-local index
     Kv = np.zeros((7, M))  # stage derivatives of v (= stage accelerations), window-local index
     xs = np.zeros(M)
     vs = np.zeros(M)
-    F = np.zeros(M)
+    F = np.zeros(M + 1)  # contact forces, F[j + 1] for contact j (see _common.accelerations)
     Q = np.zeros(7)
     ratio = np.zeros(2 * M)
     peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
     t_frozen = np.zeros(M)  # time each granule left the trailing window
+    # The step loop works on borrowed views (see _common.borrowed): the arguments are held by
+    # our caller, the scratch arrays above by the keep_alive call after the loop.
+    status = _dp5_loop(
+        borrowed(m), borrowed(c), n, pw, borrowed(obs), rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
+        t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, borrowed(t_grid), borrowed(x), borrowed(v),
+        borrowed(peak_v), borrowed(peak_t), borrowed(grid_v), borrowed(peak_f), borrowed(peak_ft), borrowed(grid_f),
+        borrowed(info), borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F),
+        borrowed(Q), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
+    keep_alive(inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen)
+    return status
+
+
+@njit(**JIT)
+def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
+              exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
+              inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen):
+    """The step loop of :func:`dp5_integrate`, on borrowed arrays (``_common.borrowed``: no reference
+    counting in the loop): its arguments, ``inv_m`` = 1 / m and the zeroed scratch arrays (stage
+    derivatives ``Kx``, ``Kv`` (7, M); ``xs``, ``vs``, ``peak_d``, ``t_frozen`` (M); contact forces
+    ``F`` (M + 1); dense-output weights ``Q`` (7); error ratios ``ratio`` (2 M))."""
+    M = m.shape[0]
+    n_obs = obs.shape[0]
+    n_grid = t_grid.shape[0]
 
     # The window: granules lo..hi-1 are integrated. X, V, C, IM, MM are views from granule lo on
     # (contiguous, so the stage loops vectorise); Kx, Kv are shifted to start at lo at each cut.

@@ -14,5 +14,11 @@ JIT = dict(
     boundscheck=False,
 )
 
+#: Same flags, inlined into the caller at Numba-IR level: for the helpers called every step of an
+#: integrator's loop. Numba does not let LLVM inline across separately compiled functions, and a call
+#: passes each array as seven scalars (plus a reference-count increment and decrement for an owning
+#: array, see ``_common.borrowed``): per call more than the arithmetic of the small helpers.
+JIT_INLINE = dict(JIT, inline="always")
+
 #: Same flags plus threading, for the ensemble loop (``numba.prange``).
 JIT_PARALLEL = dict(JIT, parallel=True)

@@ -66,7 +66,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
     a_new = np.zeros(M)
     v_old = np.zeros(M)
     x_old = np.zeros(M)
-    F = np.zeros(M)
+    F = np.zeros(M + 1)  # contact forces, F[j + 1] for contact j (see _common.accelerations)
     hi = initial_window(x, v)
     accelerations(x, c, inv_m, n, pw, hi, F, a)
     n_eval = 1
