@@ -27,6 +27,7 @@ import math
 
 import numba
 from numba import njit, types
+from numba.core import errors
 from numba.extending import intrinsic, overload
 
 from ._jit import JIT, JIT_INLINE
@@ -69,6 +70,9 @@ def borrowed(a):
 
 @overload(borrowed, jit_options=JIT)
 def _borrowed_compiled(a):
+    if not (isinstance(a, types.Array) and a.layout == "C"):  # carray assumes C order
+        raise errors.TypingError(f"borrowed() takes a C-contiguous array, got {a}")
+
     def impl(a):
         return numba.carray(_data_pointer(a), a.shape)
 
