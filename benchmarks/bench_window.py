@@ -54,8 +54,8 @@ from bench_simulate import machine  # noqa: E402
 
 INTEGRATORS = {
     "exact": lambda: gc.DP5(1e-6, 1e-9),
-    "relaxed": gc.DP5.relaxed,
-    "windowed": gc.DP5.windowed,
+    "relaxed": lambda: gc.DP5.relaxed(),  # looked up when called: the 0.2 baseline imports this module too
+    "windowed": lambda: gc.DP5.windowed(),
 }
 PAPER_SIZES = (6, 11, 16, 26)
 PAPER_REALIZATIONS = 30_000
@@ -65,23 +65,21 @@ TARGET_PAPER = 300.0
 #: granchain before issue 9 (0.2.0 with issues 8, 10-13): the DP5 the issue measured.
 BASELINE_COMMIT = "3dc0bcf"
 BASELINE_SCRIPT = """
-import importlib.util, json, os, sys, time
+import importlib.util, json, os, sys
 # granchain from the extracted directory, also where the package is installed in editable mode
-# (whose import hook would win over sys.path)
-package, n_large, realizations, threads, repeat = sys.argv[1], *(int(a) for a in sys.argv[2:6])
+# (whose import hook would win over sys.path); then this benchmark's own run() on it
+package, bench_dir, n_large, realizations, threads, repeat = sys.argv[1], sys.argv[2], *(int(a) for a in sys.argv[3:7])
 spec = importlib.util.spec_from_file_location("granchain", os.path.join(package, "granchain", "__init__.py"),
                                               submodule_search_locations=[os.path.join(package, "granchain")])
 gc = importlib.util.module_from_spec(spec)
 sys.modules["granchain"] = gc
 spec.loader.exec_module(gc)
 assert gc.__file__.startswith(package), gc.__file__
-def run(n_large, realizations, threads):
-    c0 = time.process_time()
-    ds = gc.run_ensemble(gc.RandomDecorated(n_large), realizations=realizations, seed=0, chains="decorated",
-                         integrator=gc.DP5(1e-6, 1e-9), threads=threads, progress=False, chunk_size=max(realizations, 1))
-    return time.process_time() - c0, float(ds["n_steps"].mean()), int((ds["status"] != 0).sum())
-run(6, 2, threads)  # compile
-print(json.dumps([gc.__version__] + list(min(run(n_large, realizations, threads) for _ in range(repeat)))))
+sys.path.insert(0, bench_dir)
+from bench_window import run
+run(6, 2, gc.DP5(1e-6, 1e-9), threads=threads)  # compile
+cpu, wall, failed, steps = min(run(n_large, realizations, gc.DP5(1e-6, 1e-9), threads=threads) for _ in range(repeat))
+print(json.dumps([gc.__version__, cpu, steps, failed]))
 """
 
 
@@ -113,7 +111,9 @@ def baseline_package() -> str | None:
 def run_baseline(package, n_large, realizations, threads, repeat):
     """(CPU seconds, mean accepted steps, failed) of the 0.2 DP5 on the same realisations, in a subprocess."""
     env = dict(os.environ, NUMBA_CACHE_DIR=os.path.join(package, "numba-cache"))
-    out = subprocess.run([sys.executable, "-c", BASELINE_SCRIPT, package, str(n_large), str(realizations), str(threads), str(repeat)],
+    bench_dir = os.path.dirname(os.path.abspath(__file__))
+    out = subprocess.run([sys.executable, "-c", BASELINE_SCRIPT, package, bench_dir, str(n_large), str(realizations), str(threads),
+                          str(repeat)],
                          env=env, capture_output=True, text=True, check=True).stdout
     version, cpu, steps, failed = json.loads(out.strip().splitlines()[-1])
     return cpu, steps, failed, version

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.integrate import DOP853 as _SciPyDOP853
 from scipy.optimize import brentq
 
-from ._kernels._common import MAX_STEPS, NONFINITE, RATTLER_MASS_RATIO, STEP_UNDERFLOW, SUCCESS, T_MAX
+from ._kernels._common import INFO_SIZE, MAX_STEPS, NONFINITE, RATTLER_MASS_RATIO, STEP_UNDERFLOW, SUCCESS, T_MAX, write_info
 
 
 def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float):
@@ -161,5 +161,6 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     for j in range(M - 1):  # as final_force_peaks
         if v_end[j] - v_end[j + 1] > 0.0 and f_end[j] > 0.0 and f_end[j] > peak_f[j] + peak_rtol * abs(peak_f[j]):
             peak_f[j], peak_ft[j] = f_end[j], solver.t
-    info = np.array([solver.t, n_steps, 0.0, exit_since, solver.nfev, 0.0, 0.0], dtype=float)  # INFO_* slots: no window
+    info = np.zeros(INFO_SIZE)
+    write_info(info, solver.t, n_steps, 0, exit_since, solver.nfev, 0, 0.0)  # no rejections counted, no window
     return status, info, peak_v, peak_t, grid_v, solver.y[:M].copy(), solver.y[M:].copy(), peak_f, peak_ft, grid_f
