@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hs
 
 import granchain as gc
 
@@ -149,6 +151,39 @@ def test_dp5_error_norm_keeps_a_nan(where):
     (Kx if where < hi else Kv)[3, where % hi] = np.nan
     assert _error_norm(x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == math.inf
     assert np.isnan(ratio[where]) and np.isfinite(np.delete(ratio, where)).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=hs.integers(0, 2**32 - 1), hi=hs.integers(1, 60), relaxed=hs.integers(0, 60),
+       exponent=hs.integers(-1080, 1030))
+def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
+    """The error norm takes the maximum of the ratios as an integer maximum of their bit patterns; it
+    must be exactly the floating-point maximum of |error| / scale computed independently (NumPy, the
+    same operations in the same order), from subnormal to overflowing errors (inf: refused step)."""
+    from granchain._kernels import _dp5
+
+    rng = np.random.default_rng(seed)
+    x, v, xs, vs = (rng.standard_normal(hi) for _ in range(4))
+    Kx, Kv = rng.standard_normal((7, hi)), rng.standard_normal((7, hi))
+    Kx[:, rng.random(hi) < 0.2] = 0.0  # exact zeros (resting granules)
+    with np.errstate(over="ignore", under="ignore"):
+        Kx = np.ldexp(Kx, exponent)  # scaled by 2^exponent: subnormal ... inf
+    h, rtol, atol, factor = 1e-3, 1e-6, 1e-9, 1000.0
+    err = _dp5._error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, np.zeros(2 * hi))
+
+    E = (_dp5.E1, _dp5.E3, _dp5.E4, _dp5.E5, _dp5.E6, _dp5.E7)
+    rows = (0, 2, 3, 4, 5, 6)
+    w = np.where(np.arange(hi) < relaxed, factor, 1.0)
+    with np.errstate(all="ignore"):
+        ratios = []
+        for K, y, ys in ((Kx, x, xs), (Kv, v, vs)):
+            acc = E[0] * K[rows[0]]
+            for e, r in zip(E[1:], rows[1:]):
+                acc = acc + e * K[r]
+            ratios.append(np.abs(h * acc) / ((atol + rtol * np.maximum(np.abs(y), np.abs(ys))) * w))
+        ratios = np.concatenate(ratios)
+    expected = ratios.max() if np.isfinite(ratios).all() else math.inf
+    assert err == expected
 
 
 def test_borrowed_views_share_memory():

@@ -243,8 +243,9 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
     (multiplying by 1 is exact: without a relaxed zone the norm is bitwise the plain one).
 
     The ratios go through the scratch array ``ratio`` so that the division loop vectorises; their
-    maximum is then an integer maximum of their bit patterns (below). A NaN ratio (a non-finite
-    state) is never lost to a later finite one: its pattern is above every finite one.
+    maximum is then an integer maximum of their bit patterns (below; ``ratio[0]`` is overwritten with
+    it). A NaN ratio (a non-finite state) is never lost to a later finite one: its pattern is above
+    every finite one.
     """
     for i in range(hi):
         w = factor if i < relaxed else 1.0
