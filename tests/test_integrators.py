@@ -138,7 +138,7 @@ def test_dp5_error_follows_rtol():
 def test_dp5_error_norm_keeps_a_nan(where):
     """A NaN ratio anywhere makes the error norm infinite (the step is refused as non-finite), also when
     finite ratios follow it (the max loop once let a later finite ratio overwrite the NaN); with all
-    ratios finite the norm is their maximum, whatever the accumulator that holds it."""
+    ratios finite the norm is their maximum, wherever it is."""
     from granchain._kernels._dp5 import _error_norm
 
     hi = 50
