@@ -256,8 +256,9 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
         ratio[i] = abs(ex) / sx
         ratio[hi + i] = abs(ev) / sv
     # The maximum of the bit patterns (sign cleared): for non-negative doubles their order is the
-    # order of the numbers, inf and NaN above every finite one, and an integer maximum vectorises
-    # (a floating-point one does not without fast-math). Bitwise the same maximum.
+    # order of the numbers, inf and NaN above every finite one, and an integer maximum can vectorise
+    # (a floating-point one cannot without fast-math; measured, no faster than the float loop it
+    # replaced, but simpler). Bitwise the same maximum.
     bits = ratio.view(np.int64)
     top = 0
     for i in range(2 * hi):
@@ -348,17 +349,16 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
 
-    # The window: granules lo..hi-1 are integrated. X, V, C, IM, MM are views from granule lo on
-    # (contiguous, so the stage loops vectorise); Kx, Kv are shifted to start at lo at each cut.
+    # The window: granules lo..hi-1 are integrated (lo = 0 until a trailing-window cut). Kx, Kv are
+    # window-local (shifted to start at lo at each cut); the other arrays are read through views from
+    # granule lo on, taken in the step loop below.
     wall = has_wall(m)
     goal = (relax_lag > 0 or window_lag > 0) and not wall
     lo = 0
-    X, V, C, IM, MM = x[lo:], v[lo:], c[lo:], inv_m[lo:], m[lo:]
-    XS, VS = xs[lo:], vs[lo:]  # scratch of the window's length (the force routines read its length)
     hi = initial_window(x, v)
-    accelerations(X, C, IM, n, pw, hi, F, Kv[0])
+    accelerations(x, c, inv_m, n, pw, hi, F, Kv[0])
     for i in range(hi):
-        Kx[0, i] = V[i]
+        Kx[0, i] = v[i]
     n_eval = 1
     front = -1  # observed granule (index into obs) of the front
     relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
@@ -381,6 +381,8 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
     # inside it, a step cost 15-20 % more on N = 6 and 10-15 % more on N = 26 decorated chains
     # (~410 -> ~350 ns and ~750 -> ~670 ns, exact DP5, same-process timings), window or not.
     while status < 0:
+        # Views from granule lo on (contiguous, so the stage loops vectorise); XS, VS are scratch of
+        # the window's length (the force routines read its length).
         X, V, C, IM, MM = x[lo:], v[lo:], c[lo:], inv_m[lo:], m[lo:]
         XS, VS = xs[lo:], vs[lo:]
         while status < 0:
@@ -514,7 +516,7 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 err_old = max(err, 1e-4)
             if cut:  # new views from the new window start
                 break
-    X, V, C = x[lo:], v[lo:], c[lo:]
+    X, V, C = x[lo:], v[lo:], c[lo:]  # a cut in the last step left the loop's views behind
     final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
     final_force_peaks(X, V, C, n, pw, lo, t, peak_rtol, peak_f, peak_ft)
     for k in range(lo):  # the granules behind the window continued ballistically
