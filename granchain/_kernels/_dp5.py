@@ -89,6 +89,20 @@ MAX_FACTOR = 10.0
 #: Bit masks of a float64 (``_error_norm``): all but the sign; the exponent of inf and NaN.
 SIGN_CLEAR = 0x7FFF_FFFF_FFFF_FFFF
 EXPONENT_ALL_ONES = 0x7FF0_0000_0000_0000
+#: The padded layout (issue 9, item 4): the loops over the window (stages, error norm, update) run
+#: to the next multiple of LANES past its end. LLVM vectorises them LANES doubles wide (AVX-512) and
+#: finishes a loop whose length is not a multiple of that one element at a time, which cost a step
+#: as much as the vector part (the six stages: ~460 ns for a window of 31 granules, ~290 ns for 32).
+#: The granules between the window's end and that multiple are exactly at rest and uncompressed
+#: (``_common.WINDOW_MARGIN``) or padding past the chain's end (zero stiffness, zero inverse mass):
+#: every stage gives them exact zeros, so the results are bitwise those of the unpadded loops.
+LANES = 8
+
+
+@njit(**JIT_INLINE)
+def padded_width(hw):
+    """The loop length for a window of ``hw`` granules: ``hw`` rounded up to a multiple of LANES."""
+    return (hw + LANES - 1) // LANES * LANES
 
 
 @njit(**JIT)
@@ -247,14 +261,15 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
     it). A NaN ratio (a non-finite state) is never lost to a later finite one: its pattern is above
     every finite one.
     """
-    for i in range(hi):
+    for i in range(hi):  # positions, then velocities: two loops of few streams each vectorise
         w = factor if i < relaxed else 1.0
         ex = h * (E1 * Kx[0, i] + E3 * Kx[2, i] + E4 * Kx[3, i] + E5 * Kx[4, i] + E6 * Kx[5, i] + E7 * Kx[6, i])
+        ratio[i] = abs(ex) / ((atol + rtol * max(abs(x[i]), abs(xs[i]))) * w)
+    rv = ratio[hi:]
+    for i in range(hi):
+        w = factor if i < relaxed else 1.0
         ev = h * (E1 * Kv[0, i] + E3 * Kv[2, i] + E4 * Kv[3, i] + E5 * Kv[4, i] + E6 * Kv[5, i] + E7 * Kv[6, i])
-        sx = (atol + rtol * max(abs(x[i]), abs(xs[i]))) * w
-        sv = (atol + rtol * max(abs(v[i]), abs(vs[i]))) * w
-        ratio[i] = abs(ex) / sx
-        ratio[hi + i] = abs(ev) / sv
+        rv[i] = abs(ev) / ((atol + rtol * max(abs(v[i]), abs(vs[i]))) * w)
     # The maximum of the bit patterns (sign cleared): for non-negative doubles their order is the
     # order of the numbers, inf and NaN above every finite one, and an integer maximum can vectorise
     # (a floating-point one cannot without fast-math; measured, no faster than the float loop it
@@ -315,25 +330,37 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, rela
     Returns the status code (granchain._kernels._common).
     """
     M = m.shape[0]
-    inv_m = 1.0 / m
-    Kx = np.zeros((7, M))  # stage derivatives of x (= stage velocities), window-local index
-    Kv = np.zeros((7, M))  # stage derivatives of v (= stage accelerations), window-local index
-    xs = np.zeros(M)
-    vs = np.zeros(M)
-    F = np.zeros(M + 1)  # contact forces, F[j + 1] for contact j (see _common.accelerations)
+    # The padded layout (see LANES): state, stiffness and inverse masses of the M granules followed
+    # by LANES padding granules with zero stiffness and zero inverse mass, which stay exactly at rest.
+    Mp = M + LANES
+    xp = np.zeros(Mp)
+    vp = np.zeros(Mp)
+    cp = np.zeros(Mp)
+    inv_m = np.zeros(Mp)
+    xp[:M] = x
+    vp[:M] = v
+    cp[:M - 1] = c
+    inv_m[:M] = 1.0 / m
+    Kx = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
+    Kv = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
+    xs = np.zeros(Mp)
+    vs = np.zeros(Mp)
+    F = np.zeros(Mp + 1)  # contact forces, F[j + 1] for contact j (see _common.accelerations)
     Q = np.zeros(7)
-    ratio = np.zeros(2 * M)
+    ratio = np.zeros(2 * Mp)
     peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
     t_frozen = np.zeros(M)  # time each granule left the trailing window
     # The step loop works on borrowed views (see _common.borrowed): the arguments are held by
     # our caller, the scratch arrays above by the keep_alive call after the loop.
     status = _dp5_loop(
-        borrowed(m), borrowed(c), n, pw, borrowed(obs), rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
-        t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, borrowed(t_grid), borrowed(x), borrowed(v),
+        borrowed(m), borrowed(cp), n, pw, borrowed(obs), rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
+        t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, borrowed(t_grid), borrowed(xp), borrowed(vp),
         borrowed(peak_v), borrowed(peak_t), borrowed(grid_v), borrowed(peak_f), borrowed(peak_ft), borrowed(grid_f),
         borrowed(info), borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F),
         borrowed(Q), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
-    keep_alive(inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen)
+    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen)
+    x[:] = xp[:M]
+    v[:] = vp[:M]
     return status
 
 
@@ -342,10 +369,13 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
               exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
               inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen):
     """The step loop of :func:`dp5_integrate`, on borrowed arrays (``_common.borrowed``: no reference
-    counting in the loop): its arguments, ``inv_m`` = 1 / m and the zeroed scratch arrays (stage
-    derivatives ``Kx``, ``Kv`` (7, M); ``xs``, ``vs``, ``peak_d``, ``t_frozen`` (M); contact forces
-    ``F`` (M + 1); dense-output weights ``Q`` (7); error ratios ``ratio`` (2 M))."""
+    counting in the loop): its arguments, with the state ``x``, ``v``, the stiffness ``c`` and the
+    inverse masses ``inv_m`` = 1 / m in the padded layout (length Mp = M + LANES, see :data:`LANES`),
+    and the zeroed scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``, ``vs`` (Mp);
+    ``peak_d``, ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q`` (7);
+    error ratios ``ratio`` (2 Mp))."""
     M = m.shape[0]
+    Mp = x.shape[0]
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
 
@@ -355,7 +385,7 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
     wall = has_wall(m)
     goal = (relax_lag > 0 or window_lag > 0) and not wall
     lo = 0
-    hi = initial_window(x, v)
+    hi = initial_window(x[:M], v[:M])
     accelerations(x, c, inv_m, n, pw, hi, F, Kv[0])
     for i in range(hi):
         Kx[0, i] = v[i]
@@ -367,7 +397,7 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    initial_force_records(x, m, c, n, pw, g, peak_f, peak_ft, grid_f)
+    initial_force_records(x[:M], m, c[:M - 1], n, pw, g, peak_f, peak_ft, grid_f)
 
     h = h_fixed if h_fixed > 0.0 else h_init
     err_old = 1e-4
@@ -381,10 +411,12 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
     # inside it, a step cost 15-20 % more on N = 6 and 10-15 % more on N = 26 decorated chains
     # (~410 -> ~350 ns and ~750 -> ~670 ns, exact DP5, same-process timings), window or not.
     while status < 0:
-        # Views from granule lo on (contiguous, so the stage loops vectorise); XS, VS are scratch of
-        # the window's length (the force routines read its length).
-        X, V, C, IM, MM = x[lo:], v[lo:], c[lo:], inv_m[lo:], m[lo:]
+        # Views from granule lo on (contiguous, so the stage loops vectorise): X, V, C, IM, XS, VS
+        # through the padding (the loops over the window), XM, VM, MM to the chain's end (the
+        # routines that look for its last granule).
+        X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
         XS, VS = xs[lo:], vs[lo:]
+        XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
         while status < 0:
             if n_acc + n_rej >= max_steps:
                 status = MAX_STEPS
@@ -396,14 +428,15 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 h = t_stop - t
                 last = True
             hw = hi - lo
+            hp = padded_width(hw)
             # Stages 2..7 (stage 7 is the new solution, reused as stage 1 next step).
-            _stages(X, V, Kx, Kv, XS, VS, h, hw, C, IM, n, pw, F)
+            _stages(X, V, Kx, Kv, XS, VS, h, hp, C, IM, n, pw, F)
             n_eval += 6
             # xs, vs now hold the 5th-order solution at t + h.
             accept = True
             err = 0.0
             if h_fixed <= 0.0:
-                err = _error_norm(X, V, XS, VS, Kx, Kv, h, hw, relaxed, relax_factor, rtol, atol, ratio)
+                err = _error_norm(X, V, XS, VS, Kx, Kv, h, hp, relaxed, relax_factor, rtol, atol, ratio)
                 if not math.isfinite(err):
                     status = NONFINITE
                     break
@@ -463,7 +496,7 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                     grid_f[g] = contact_force(_dense_compression(M - 2 - lo, X, Kx, h, Q), C[M - 2 - lo], n, pw) if M - 2 < hi else 0.0
                 g += 1
 
-            for i in range(hw):
+            for i in range(hp):
                 X[i] = XS[i]
                 V[i] = VS[i]
                 Kx[0, i] = Kx[6, i]
@@ -474,7 +507,7 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 status = NONFINITE
                 break
             if hi < M:
-                new_hi = lo + advance_window(X, V, hw)
+                new_hi = lo + advance_window(XM, VM, hw)
                 if new_hi > hi:
                     hi = new_hi
                     accelerations(X, C, IM, n, pw, hi - lo, F, Kv[0])
@@ -492,8 +525,8 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                         frozen_potential = add_potential(frozen_potential, X, C, n, 0, d - 1)
                         for i in range(d):
                             t_frozen[lo + i] = t
-                        for s in range(7):
-                            for i in range(hi - new_lo):
+                        for s in range(7):  # the whole padded width: zeros follow the window
+                            for i in range(Mp - new_lo):
                                 Kx[s, i] = Kx[s, i + d]
                                 Kv[s, i] = Kv[s, i + d]
                         lo = new_lo
@@ -501,11 +534,12 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 if relax_lag > 0 and front >= relax_lag:
                     relaxed = max(0, obs[front - relax_lag] - lo)
 
-            if cut:  # X, V, MM still start at the old window start
-                status, exit_since = end_of_step(x[lo:], v[lo:], m[lo:], hi - lo, t, t_max, stop_at_exit, exit_since,
+            if cut:  # XM, VM, MM still start at the old window start
+                status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], hi - lo, t, t_max, stop_at_exit, exit_since,
                                                  exit_margin, t_needed)
             else:
-                status, exit_since = end_of_step(X, V, MM, hi - lo, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed)
+                status, exit_since = end_of_step(XM, VM, MM, hi - lo, t, t_max, stop_at_exit, exit_since, exit_margin,
+                                                 t_needed)
             if status >= 0:
                 break
 
@@ -516,7 +550,7 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 err_old = max(err, 1e-4)
             if cut:  # new views from the new window start
                 break
-    X, V, C = x[lo:], v[lo:], c[lo:]  # a cut in the last step left the loop's views behind
+    X, V, C = x[lo:M], v[lo:M], c[lo:M - 1]  # the chain without padding (a cut in the last step left the views behind)
     final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
     final_force_peaks(X, V, C, n, pw, lo, t, peak_rtol, peak_f, peak_ft)
     for k in range(lo):  # the granules behind the window continued ballistically
