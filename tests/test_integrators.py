@@ -186,6 +186,56 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
     assert err == expected
 
 
+PADDING_SCRIPT = """
+import json, numba, numpy as np, granchain as gc
+from granchain._integrators import RunControls
+from granchain._kernels import _dp5
+assert numba.config.DISABLE_JIT
+cases = {f"decorated N={k}": gc.decorated([0.3, 0.2, 0.35, 0.25, 0.3, 0.22][: k - 1]) for k in (2, 3, 4, 5, 6, 7)}
+cases.update({f"monodisperse {k}": gc.monodisperse(k) for k in (8, 9)})
+integrators = {"exact": gc.DP5(1e-6, 1e-9), "windowed": gc.DP5(1e-6, 1e-9, relaxed_lag=1, window_lag=2)}
+def run(chain, integ):
+    x, v = np.zeros(chain.size), np.zeros(chain.size)
+    v[0] = chain.initial_velocity
+    status, info, *arrays = integ.integrate(chain, x, v, t_grid=np.linspace(0.0, 12.0, 25), t_max=1e3,
+                                            stop_at_exit=True, controls=RunControls())
+    return [int(status), info.tolist(), x.tolist(), v.tolist()] + [np.asarray(a).tolist() for a in arrays]
+padded = {f"{c}/{i}": run(chain, integ) for c, chain in cases.items() for i, integ in integrators.items()}
+widths = sorted({_dp5.padded_width(hw) for hw in range(1, 20)})
+_dp5.padded_width = lambda hw: hw  # the loops end at the window's end: the unpadded layout
+plain = {f"{c}/{i}": run(chain, integ) for c, chain in cases.items() for i, integ in integrators.items()}
+print(json.dumps(dict(padded=padded, plain=plain, widths=widths)))
+"""
+
+
+def test_padded_loops_are_bitwise_the_window():
+    """The DP5 loops run to the next multiple of ``_dp5.LANES`` past the window (padded layout); the
+    extra granules (at rest ahead of the pulse, or padding with zero stiffness and inverse mass) must
+    change nothing: with the loops ending at the window's end instead, every output is bitwise the
+    same. Pure-Python kernels (NUMBA_DISABLE_JIT) so that the loop length can be swapped; chains of
+    2 to 13 granules (every remainder mod 8, and the chain's end inside the padding), exact and with
+    trailing-window cuts (which shift the stage arrays)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from granchain._kernels._common import INFO_WINDOW_START
+
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    proc = subprocess.run([sys.executable, "-c", PADDING_SCRIPT], env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["widths"] == [8, 16, 24]
+    assert out["padded"].keys() == out["plain"].keys()
+    cut = 0
+    for key, got in out["padded"].items():
+        assert got[0] == 0, key
+        assert got == out["plain"][key], f"{key}: the padded loops changed the result"
+        cut += got[1][INFO_WINDOW_START] > 0  # the trailing window did cut
+    assert cut >= 4, "too few runs with a trailing-window cut to test the shifted stage arrays"
+
+
 def test_borrowed_views_share_memory():
     """The DP5 step loop runs on borrowed views (no reference counting): they must be views of the
     very arrays the caller passed, so the kernel's writes reach them."""
