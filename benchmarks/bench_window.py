@@ -144,6 +144,15 @@ def main(argv=None):
         run(6, 2, make(), chains="both")
 
     package = baseline_package()
+    try:
+        measure(args, package)
+    finally:  # the extracted baseline goes, also on an error or Ctrl-C
+        if package is not None:
+            shutil.rmtree(package, ignore_errors=True)
+
+
+def measure(args, package):
+    """Parts 1-3 and the verdicts (``package``: the baseline's directory, or None)."""
     print(f"\n1. CPU-ms per decorated realisation, N = 26, {args.realizations} realisations, best of {args.repeat} "
           f"(baselines, same run: exact DP5(1e-6, 1e-9) in this version; 0.2 DP5 = the same at commit {BASELINE_COMMIT})")
     if package is None:
@@ -200,8 +209,6 @@ def main(argv=None):
                             f"{total / 60:.1f} min estimated (target <= {TARGET_PAPER / 60:.0f} min)")
     print()
     print("\n".join(verdicts))
-    if package is not None:
-        shutil.rmtree(package, ignore_errors=True)
 
 
 if __name__ == "__main__":
