@@ -192,7 +192,7 @@ from granchain._integrators import RunControls
 from granchain._kernels import _dp5
 assert numba.config.DISABLE_JIT
 cases = {f"decorated N={k}": gc.decorated([0.3, 0.2, 0.35, 0.25, 0.3, 0.22][: k - 1]) for k in (2, 3, 4, 5, 6, 7)}
-cases.update({f"monodisperse {k}": gc.monodisperse(k) for k in (8, 9)})
+cases.update({f"monodisperse {k}": gc.monodisperse(k) for k in (2, 4, 6, 8, 9)})
 integrators = {"exact": gc.DP5(1e-6, 1e-9), "windowed": gc.DP5(1e-6, 1e-9, relaxed_lag=1, window_lag=2)}
 def run(chain, integ):
     x, v = np.zeros(chain.size), np.zeros(chain.size)
