@@ -449,7 +449,13 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 continue
 
             # Accepted: peaks and grid samples from the dense output over [t, t + h].
-            for q in range(n_obs):
+            # Velocity maxima where an acceleration goes from + to -: a vectorised count over every
+            # granule of the window (zeros past it) first; the loop over the observed granules runs
+            # only when it finds one (1.6 % of the steps of an N = 26 decorated chain have one there).
+            n_candidates = 0
+            for i in range(hp):
+                n_candidates += (Kv[0, i] > 0.0) & (Kv[6, i] <= 0.0)
+            for q in range(n_obs if n_candidates > 0 else 0):
                 k = obs[q] - lo
                 if k < 0 or k >= hw:
                     continue
@@ -463,9 +469,15 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                         peak_v[q] = vp
                         peak_t[q] = t + theta * h
                     front = max(front, q)
-            # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -.
+            # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -. The same
+            # vectorised count first (~80 % of the steps of an N = 26 decorated chain have no
+            # candidate; the contacts past the window, resting or padding, are never one, except the
+            # padding's with the last granule, which only lets the loop run).
             # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
-            for j in range(hw - 1):
+            n_candidates = 0
+            for j in range(hp):
+                n_candidates += (Kx[0, j] - Kx[0, j + 1] > 0.0) & (Kx[6, j] - Kx[6, j + 1] <= 0.0)
+            for j in range(hw - 1 if n_candidates > 0 else 0):
                 w0 = Kx[0, j] - Kx[0, j + 1]
                 w1 = Kx[6, j] - Kx[6, j + 1]
                 if (w0 > 0.0) & (w1 <= 0.0):
