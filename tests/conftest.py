@@ -13,7 +13,11 @@ deadline and the randomness.
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -45,3 +49,19 @@ def chain_energy(chain, x, v) -> float:
 def energy_of():
     """``energy_of(chain, x, v)``: the total energy, independent of the package's kernels."""
     return chain_energy
+
+
+def _run_without_jit(script: str, timeout: float = 300):
+    """Run ``script`` in a fresh Python with NUMBA_DISABLE_JIT=1 (every kernel as plain Python) from
+    the repository's root; it must succeed. Returns the JSON it printed on its last line."""
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    proc = subprocess.run([sys.executable, "-c", script], env=env, cwd=Path(__file__).parents[1], capture_output=True,
+                          text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="session")
+def run_without_jit():
+    """``run_without_jit(script, timeout=300)``: the JSON of the script's last line, run with the JIT off."""
+    return _run_without_jit

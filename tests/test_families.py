@@ -11,9 +11,6 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import textwrap
 import warnings
 from pathlib import Path
@@ -252,7 +249,7 @@ def test_dop853_runs_ensembles_through_the_same_seam():
     assert int(ref["n_valid"][0]) == 3
 
 
-def test_ensemble_runs_without_jit(tmp_path):
+def test_ensemble_runs_without_jit(run_without_jit):
     """NUMBA_DISABLE_JIT=1: the kernels run as Python (slow) and give the compiled results."""
     family = "gc.RandomRadii(5, gc.Uniform(0.7, 1.0))"
     script = textwrap.dedent(f"""
@@ -260,10 +257,7 @@ def test_ensemble_runs_without_jit(tmp_path):
         ds = gc.run_ensemble({family}, realizations=3, seed=1, chunk_size=2, progress=False, t_grid=[0.0, 2.0, 4.0])
         print(json.dumps(ds["peak_velocity"].values.tolist()))
     """)
-    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=Path(__file__).parents[1], timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    nojit = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
+    nojit = np.array(run_without_jit(script))
     jit = gc.run_ensemble(eval(family), realizations=3, seed=1, chunk_size=2, progress=False, t_grid=[0.0, 2.0, 4.0])
     np.testing.assert_allclose(nojit, jit["peak_velocity"].values, rtol=1e-12)
 

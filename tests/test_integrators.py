@@ -208,24 +208,16 @@ print(json.dumps(dict(padded=padded, plain=plain, widths=widths)))
 """
 
 
-def test_padded_loops_are_bitwise_the_window():
+def test_padded_loops_are_bitwise_the_window(run_without_jit):
     """The DP5 loops run to the next multiple of ``_dp5.LANES`` past the window (padded layout); the
     extra granules (at rest ahead of the pulse, or padding with zero stiffness and inverse mass) must
     change nothing: with the loops ending at the window's end instead, every output is bitwise the
     same. Pure-Python kernels (NUMBA_DISABLE_JIT) so that the loop length can be swapped; chains of
     2 to 13 granules (every remainder mod 8, and the chain's end inside the padding), exact and with
     trailing-window cuts (which shift the stage arrays)."""
-    import json
-    import os
-    import subprocess
-    import sys
-
     from granchain._kernels._common import INFO_WINDOW_START
 
-    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    proc = subprocess.run([sys.executable, "-c", PADDING_SCRIPT], env=env, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out = run_without_jit(PADDING_SCRIPT, timeout=600)
     assert out["widths"] == [8, 16, 24]
     assert out["padded"].keys() == out["plain"].keys()
     cut = 0

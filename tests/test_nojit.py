@@ -8,10 +8,6 @@ must agree to 1e-9.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
@@ -54,12 +50,8 @@ SCRIPT = textwrap.dedent(
 
 
 @pytest.fixture(scope="module")
-def nojit_results():
-    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    code = SCRIPT.format(chains=repr(CHAINS), integrators=INTEGRATORS)
-    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+def nojit_results(run_without_jit):
+    return run_without_jit(SCRIPT.format(chains=repr(CHAINS), integrators=INTEGRATORS))
 
 
 def test_compiled_in_this_process():
