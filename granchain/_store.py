@@ -375,6 +375,19 @@ def stored_parameters(path) -> str | None:
     return None
 
 
+def writable_array(path, name: str):
+    """The existing Zarr array ``name`` of the store at ``path``, open for writing, that writes every
+    chunk it is given, even one equal to the fill value (a missing data file means damage:
+    :func:`check_chunk`). ``zarr.open`` honours ``config`` for an existing array; ``zarr.open_array``
+    (zarr 3.1) silently drops it, and a chunk of all zeros (status, done) was then deleted, not written."""
+    import zarr
+
+    arr = zarr.open(store=path, path=name, mode="r+", zarr_format=2, config={"write_empty_chunks": True})
+    if not isinstance(arr, zarr.Array):
+        raise ValueError(f"{path}/{name} is not a Zarr array")
+    return arr
+
+
 def _region(dims, axis_dim, sl):
     return tuple(sl if d == axis_dim else slice(None) for d in dims)
 
@@ -414,6 +427,7 @@ class ZarrSink:
 
         self.spec, self.path = spec, _check_out(path)
         self.log = log or (lambda message: None)
+        self._arrays = {}  # Zarr arrays opened by write(), by name
         self.lock = StoreLock(self.path)
         self.lock.acquire()
         try:
@@ -453,7 +467,7 @@ class ZarrSink:
 
         group = zarr.open_group(path, mode="r+", zarr_format=2, use_consolidated=False)
         for v in per_realisation_variables(self.spec.family):
-            arr = zarr.open_array(store=path, path=v.name, mode="r+", zarr_format=2, config={"write_empty_chunks": True})
+            arr = writable_array(path, v.name)
             region = _region(v.dims, "realization", sl)
             shape = tuple(s.stop - s.start if isinstance(s, slice) and s.stop is not None else n
                           for s, n in zip(region, group[v.name].shape))
@@ -566,8 +580,7 @@ class ZarrSink:
     def _mark_undone(self, chunks):
         import zarr
 
-        done = zarr.open_array(store=self.path, path="progress/done", mode="r+", zarr_format=2,
-                               config={"write_empty_chunks": True})
+        done = writable_array(self.path, "progress/done")
         for j in chunks:
             done[j] = 0
 
@@ -589,8 +602,7 @@ class ZarrSink:
         group["realization"].resize((spec.realizations,))
         group["realization"][old.realizations:] = np.arange(old.realizations, spec.realizations)
         for v in progress_variables(spec):
-            arr = zarr.open_array(store=self.path, path=f"progress/{v.name}", mode="r+", zarr_format=2,
-                                  config={"write_empty_chunks": True})
+            arr = writable_array(self.path, f"progress/{v.name}")
             shape = (spec.n_chunks,) + arr.shape[1:]
             arr.resize(shape)
             arr[old.n_chunks:] = np.full((spec.n_chunks - old.n_chunks,) + shape[1:], v.fill, dtype=v.dtype)
@@ -615,28 +627,36 @@ class ZarrSink:
         done, _ = self._done_flags(group, self.spec, warn=False)
         return [j for j in range(self.spec.n_chunks) if done[j] != 1]
 
-    def write(self, res: dict) -> None:
-        import xarray as xr
+    def _array(self, name: str):
+        """The store's Zarr array ``name`` (``progress/...`` for the progress group), opened once per run.
+        Chunks equal to the fill value are written too: a missing data file means damage (check_chunk)."""
+        if name not in self._arrays:
+            self._arrays[name] = writable_array(self.path, name)
+        return self._arrays[name]
 
+    def write(self, res: dict) -> None:
+        """Chunk ``res["chunk"]``: its per-realisation values, its sums and checksums, then its done flag.
+
+        Written with Zarr directly, into arrays opened once: the same bytes as ``Dataset.to_zarr`` with
+        a region (the values are stored as they are, in the store's dtypes and codecs), without its
+        ~0.1 s per chunk of re-opening and re-validating the store (12 s of the paper's run, while the
+        threads of the next chunk waited)."""
         spec, j = self.spec, res["chunk"]
-        data = chunk_dataset(spec, res)
-        data.to_zarr(self.path, region={"realization": spec.chunk_slice(j)}, mode="r+", consolidated=False,
-                     write_empty_chunks=True, **_fmt2())
+        sl = spec.chunk_slice(j)
+        values = {v.name: np.asarray(res[v.name]).astype(v.dtype, copy=False) for v in per_realisation_variables(spec.family)}
         # One chunk's sums, with a leading chunk axis (n_valid is (chain, 1) in the result).
-        sums = {name: (res[name].T if name == "n_valid" else res[name][None]) for name in progress_sums(spec)}
         table = {v.name: v for v in progress_variables(spec)}
-        values = {name: data[name].values for name in data.data_vars}
-        values.update({f"progress/{k}": np.asarray(a, dtype=table[k].dtype) for k, a in sums.items()})
+        for name in progress_sums(spec):
+            values[f"progress/{name}"] = np.asarray(res[name].T if name == "n_valid" else res[name][None], dtype=table[name].dtype)
         check = np.array([[digest(values[name], values[name].dtype) for name in checked_variables(spec)]], dtype=np.int64)
-        region = {"chunk": slice(j, j + 1)}
-        xr.Dataset({
-            **{k: (table[k].dims, values[f"progress/{k}"]) for k in sums},
-            "checksum": (("chunk", "checked"), check),
-        }).to_zarr(self.path, group="progress", region=region, mode="r+", consolidated=False, write_empty_chunks=True,
-                   **_fmt2())
+        for v in per_realisation_variables(spec.family):
+            self._array(v.name)[_region(v.dims, "realization", sl)] = values[v.name]
+        here = slice(j, j + 1)
+        for name in progress_sums(spec):
+            self._array(f"progress/{name}")[_region(table[name].dims, "chunk", here)] = values[f"progress/{name}"]
+        self._array("progress/checksum")[here] = check
         # The flag last: a chunk counts as done only once all its data and checksums are on disk.
-        xr.Dataset({"done": (("chunk",), np.ones(1, dtype=np.int8))}).to_zarr(
-            self.path, group="progress", region=region, mode="r+", consolidated=False, write_empty_chunks=True, **_fmt2())
+        self._array("progress/done")[here] = np.ones(1, dtype=np.int8)
 
     def finalize(self):
         import xarray as xr
