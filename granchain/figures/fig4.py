@@ -16,6 +16,8 @@ together, so their correlation is kept).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -102,7 +104,7 @@ def compute(datasets, chain: str = "decorated", shift: str = "mode", bins: int =
         raise ValueError(f"coverage must lie in (0, 1], got {coverage!r}")
     items = datasets.values() if hasattr(datasets, "values") else datasets
     stats = dict(STATISTICS, shift=_shift("mode" if shift is None else shift))
-    panels = []
+    parts = []
     for ds in sorted(items, key=lambda d: int(d.sizes["granule"])):
         N = int(ds.sizes["granule"])
         if N < 3:
@@ -125,10 +127,15 @@ def compute(datasets, chain: str = "decorated", shift: str = "mode", bins: int =
         outside = (int(num.size - hn.counts.sum()), int(theory.size - ht.counts.sum()))
         g = max(2, min(int(n_blocks), num.size // 2))
         jk = {name: analysis.block_jackknife(f, num, theory, n_blocks=g) for name, f in stats.items()}
-        panels.append(Fig4Panel(N, N - 1, num, theory, shifted, hn, ht, outside,
-                                analysis.ks_normal(num, n_mc_samples=n_mc_samples),
-                                analysis.ks_normal(theory, n_mc_samples=0), jk))
-    return Fig4Data(chain, "none" if shift is None else shift, float(coverage), tuple(panels))
+        parts.append((N, num, theory, shifted, hn, ht, outside, jk))
+    # The Lilliefors Monte Carlo (~1.2 s per panel at 30,000 values and B = 1000) on every core: its
+    # sampling, sorting and normal CDF run in NumPy and SciPy without the GIL, and each panel's
+    # resamples come from their own seeded generator, so the p-values do not depend on the threads.
+    with ThreadPoolExecutor(max_workers=max(1, min(len(parts), os.cpu_count() or 1))) as pool:
+        ks = list(pool.map(lambda part: analysis.ks_normal(part[1], n_mc_samples=n_mc_samples), parts))
+    panels = tuple(Fig4Panel(N, N - 1, num, theory, shifted, hn, ht, outside, ks_num, analysis.ks_normal(theory, n_mc_samples=0), jk)
+                   for (N, num, theory, shifted, hn, ht, outside, jk), ks_num in zip(parts, ks))
+    return Fig4Data(chain, "none" if shift is None else shift, float(coverage), panels)
 
 
 def plot(data: Fig4Data, ax=None):
