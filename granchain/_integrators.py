@@ -167,7 +167,7 @@ class _Compiled(Integrator):
         peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info = _outputs(chain.observed.size, t_grid.size, chain.size)
         status = integrate_chain(
             self.kernel_id, self.kernel_params(), chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.observed,
-            np.ones(chain.size - 1, dtype=np.int8), t_max, stop_at_exit, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, x, v,
+            t_max, stop_at_exit, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, x, v,
             peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
         )
         return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f

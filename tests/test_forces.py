@@ -7,8 +7,7 @@
 3. Verlet's peak forces converge at order 2;
 4. ensembles record forces bitwise equal to ``simulate`` of the same chain, on the family's
    ``contact`` dimension, and the store describes them;
-5. the velocity peaks did not change (forces are extra);
-6. contacts an ensemble does not store are not tracked, and that changes nothing else.
+5. the velocity peaks did not change (forces are extra).
 """
 
 from __future__ import annotations
@@ -151,48 +150,6 @@ def test_ensemble_forces_are_simulate_bitwise(key):
                     assert float(row["peak_wall_force"]) == res.peak_wall_force
                     assert float(row["peak_wall_force_time"]) == res.peak_wall_force_time
                     assert contacts.max() < chain.size - 2  # the wall's contact is stored apart
-
-
-@pytest.mark.parametrize("integrator", [gc.DP5.relaxed(), gc.DP5.windowed(), gc.Verlet(2e-4)],
-                         ids=["relaxed", "windowed", "verlet"])
-@pytest.mark.parametrize("wall", [False, True], ids=["free", "wall"])
-def test_untracked_contacts_change_nothing_else(integrator, wall):
-    """Ensembles track only the contacts they store (``_kernels._ensemble.tracked_contacts``): the
-    tracked contacts' peak forces and everything else are bitwise those of a run that tracks every
-    contact, and the untracked contacts are left at 0."""
-    from granchain._kernels._common import power_code
-    from granchain._kernels._dispatch import integrate_chain
-    from granchain._kernels._ensemble import tracked_contacts
-
-    family = gc.RandomDecorated(8, wall=wall)
-    chain = family.chain(SEED, 3)
-    contacts = family.build(family.draw_batch(SEED, [3]), "decorated").recorded_contacts()
-    grid = np.linspace(0.0, 25.0, 51)
-
-    def run(tracked):
-        M = chain.size
-        x, v = np.zeros(M), np.zeros(M)
-        v[0] = chain.initial_velocity
-        out = [np.zeros(chain.observed.size), np.zeros(chain.observed.size), np.zeros((grid.size, chain.observed.size)),
-               np.zeros(M - 1), np.zeros(M - 1), np.zeros(grid.size), np.zeros(7)]
-        status = integrate_chain(integrator.kernel_id, integrator.kernel_params(), chain.masses, chain.stiffness, chain.n,
-                                 power_code(chain.n), chain.observed, tracked, 1e3, True, 3.0, 20_000_000, 1e-6, grid, x, v,
-                                 *out)
-        return status, x, v, out
-
-    tracked = tracked_contacts(chain.size, contacts, wall)
-    assert tracked.sum() == contacts.size + wall and 0 < tracked.sum() < chain.size - 1
-    st_all, x_all, v_all, all_ = run(np.ones(chain.size - 1, dtype=np.int8))
-    st, x, v, some = run(tracked)
-    assert st == st_all == 0
-    np.testing.assert_array_equal(x, x_all)
-    np.testing.assert_array_equal(v, v_all)
-    for k in (0, 1, 2, 5, 6):  # peaks, grid velocities, wall force, info
-        np.testing.assert_array_equal(some[k], all_[k])
-    on = tracked != 0
-    for k in (3, 4):  # peak forces and their times
-        np.testing.assert_array_equal(some[k][on], all_[k][on])
-        assert np.all(some[k][~on] == 0.0) and np.all(all_[k][~on] > 0.0)  # every contact closed as the pulse passed
 
 
 def test_decorated_contact_dimension_is_the_contact_right_of_each_large_granule():

@@ -369,15 +369,14 @@ def final_peaks(obs, lo, v, a, t, peak_rtol, peak_v, peak_t):
 
 
 @njit(**JIT)
-def final_force_peaks(x, v, c, n, pw, lo, tracked, t, peak_rtol, peak_f, peak_ft):
-    """The force at the end of the run is a candidate for tracked contacts still compressing
+def final_force_peaks(x, v, c, n, pw, lo, t, peak_rtol, peak_f, peak_ft):
+    """The force at the end of the run is a candidate for contacts still compressing
     (delta > 0 and v_k - v_{k+1} > 0): their maximum lies beyond the run.
 
     ``x``, ``v``, ``c`` hold the integrated granules lo.. and their contacts (contact j of the
-    chain is entry j - lo); ``tracked`` (int8, one per contact of the chain) flags the contacts
-    whose peaks are recorded; the contacts behind a trailing window have final peaks."""
+    chain is entry j - lo); the contacts behind a trailing window have final peaks."""
     for j in range(x.shape[0] - 1):
-        if v[j] - v[j + 1] > 0.0 and tracked[lo + j] != 0:
+        if v[j] - v[j + 1] > 0.0:
             f = contact_force(x[j] - x[j + 1], c[j], n, pw)
             if f > 0.0 and is_new_peak(f, peak_f[lo + j], peak_rtol):
                 peak_f[lo + j] = f

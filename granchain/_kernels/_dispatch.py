@@ -11,8 +11,7 @@ every Dask worker and CLI start would recompile the parallel kernel.)
 
 The common contract of every single-chain kernel: integrate from (x, v) at t = 0, record the
 observed granules' peaks (``peak_v``, ``peak_t``), their velocities on ``t_grid`` into
-``grid_v`` (time-major), the peak force of every *tracked* contact (``peak_f``, ``peak_ft``, M-1 each;
-contact j is tracked where ``tracked[j]`` != 0, int8, M-1; the others keep 0), the
+``grid_v`` (time-major), every contact's peak force (``peak_f``, ``peak_ft``, M-1 each), the
 wall force on ``t_grid`` into ``grid_f`` when the last granule is a wall, fill ``info`` (slots ``INFO_*`` of ``_common``) and return a status
 code (``granchain._status``).
 """
@@ -35,7 +34,7 @@ UNKNOWN_KERNEL = -2
 
 
 @njit(**JIT)
-def integrate_chain(kernel, params, m, c, n, pw, obs, tracked, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid,
+def integrate_chain(kernel, params, m, c, n, pw, obs, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid,
                     x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
     """Integrate one chain with kernel ``kernel`` and settings ``params`` (see the module doc).
 
@@ -43,11 +42,11 @@ def integrate_chain(kernel, params, m, c, n, pw, obs, tracked, t_max, stop_at_ex
     window_lag (lags 0: off)]; Verlet: params = [dt].
     """
     if kernel == KERNEL_DP5:
-        return dp5_integrate(m, c, n, pw, obs, tracked, params[0], params[1], params[2], params[3], int(params[4]), params[5],
+        return dp5_integrate(m, c, n, pw, obs, params[0], params[1], params[2], params[3], int(params[4]), params[5],
                              int(params[6]), t_max, stop_at_exit,
                              exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft,
                              grid_f, info)
     if kernel == KERNEL_VERLET:
-        return verlet_integrate(m, c, n, pw, obs, tracked, params[0], t_max, stop_at_exit, exit_margin, max_steps, peak_rtol,
+        return verlet_integrate(m, c, n, pw, obs, params[0], t_max, stop_at_exit, exit_margin, max_steps, peak_rtol,
                                 t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info)
     return UNKNOWN_KERNEL

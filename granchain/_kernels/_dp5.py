@@ -12,7 +12,7 @@ Peaks of the observed granules are located between steps: a local maximum of
 v_k lies where its acceleration changes sign from + to -, and the root of the
 acceleration computed from the dense-output positions is found by the Illinois
 method, so peak times are not tied to the step grid. Peak contact forces the same
-way: a tracked contact j's compression peaks where the dense-output relative velocity
+way: contact j's compression peaks where the dense-output relative velocity
 v_j - v_{j+1} changes sign from + to - (checked only for contacts in the active
 window, and the root searched only when the step ends show a sign change); the
 force there is c_j delta^(n-1) of the dense-output positions.
@@ -304,8 +304,8 @@ def _open_contact_behind(x, lo, target):
 
 
 @njit(**JIT)
-def dp5_integrate(m, c, n, pw, obs, tracked, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max,
-                  stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
+def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
+                  exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
     """Integrate one chain from the state (x, v) at t = 0.
 
     ``x``, ``v`` (length M) hold the initial state and receive the final one.
@@ -315,9 +315,7 @@ def dp5_integrate(m, c, n, pw, obs, tracked, rtol, atol, h_init, h_fixed, relax_
     at each time t_grid[g] into ``grid_v[g, q]`` (time-major: one
     contiguous row per grid time). For each contact j (0-based, M-1 of them) it
     writes the maximum contact force ``peak_f[j]`` and its time ``peak_ft[j]`` (0 at
-    t = 0 for a contact that never closed; same tie rule as the velocities) if it is
-    tracked (``tracked[j]`` != 0; int8, M-1), and leaves the others at 0 (``simulate`` tracks
-    every contact, an ensemble the contacts it stores); with
+    t = 0 for a contact that never closed; same tie rule as the velocities); with
     a wall (m[M-1] = inf) ``grid_f[g]`` receives the wall force at t_grid[g]
     (untouched otherwise). ``h_fixed > 0`` turns
     step control off (fixed steps of h_fixed). With ``stop_at_exit`` the run
@@ -347,12 +345,10 @@ def dp5_integrate(m, c, n, pw, obs, tracked, rtol, atol, h_init, h_fixed, relax_
     vp = np.zeros(Mp)
     cp = np.zeros(Mp)
     inv_m = np.zeros(Mp)
-    track = np.zeros(Mp, dtype=np.int8)  # tracked contacts (the padding's: none)
     xp[:M] = x
     vp[:M] = v
     cp[:M - 1] = c
     inv_m[:M] = 1.0 / m
-    track[:M - 1] = tracked
     Kx = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
     Kv = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
     xs = np.zeros(Mp)
@@ -365,25 +361,24 @@ def dp5_integrate(m, c, n, pw, obs, tracked, rtol, atol, h_init, h_fixed, relax_
     # The step loop works on borrowed views (see _common.borrowed): the arguments are held by
     # our caller, the scratch arrays above by the keep_alive call after the loop.
     status = _dp5_loop(
-        borrowed(m), borrowed(cp), n, pw, borrowed(obs), borrowed(track), rtol, atol, h_init, h_fixed, relax_lag,
-        relax_factor, window_lag, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, borrowed(t_grid), borrowed(xp),
-        borrowed(vp), borrowed(peak_v), borrowed(peak_t), borrowed(grid_v), borrowed(peak_f), borrowed(peak_ft), borrowed(grid_f),
+        borrowed(m), borrowed(cp), n, pw, borrowed(obs), rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
+        t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, borrowed(t_grid), borrowed(xp), borrowed(vp),
+        borrowed(peak_v), borrowed(peak_t), borrowed(grid_v), borrowed(peak_f), borrowed(peak_ft), borrowed(grid_f),
         borrowed(info), borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F),
         borrowed(Q), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
-    keep_alive(xp, vp, cp, inv_m, track, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen)
+    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen)
     x[:] = xp[:M]
     v[:] = vp[:M]
     return status
 
 
 @njit(**JIT)
-def _dp5_loop(m, c, n, pw, obs, track, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max,
-              stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
+def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
+              exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
               inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen):
     """The step loop of :func:`dp5_integrate`, on borrowed arrays (``_common.borrowed``: no reference
-    counting in the loop): its arguments, with the state ``x``, ``v``, the stiffness ``c``, the
-    tracked-contact flags ``track`` and the inverse masses ``inv_m`` = 1 / m in the padded layout
-    (length Mp = M + LANES, see :data:`LANES`),
+    counting in the loop): its arguments, with the state ``x``, ``v``, the stiffness ``c`` and the
+    inverse masses ``inv_m`` = 1 / m in the padded layout (length Mp = M + LANES, see :data:`LANES`),
     and the zeroed scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``, ``vs`` (Mp);
     ``peak_d``, ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q`` (7);
     error ratios ``ratio`` (2 Mp))."""
@@ -424,10 +419,10 @@ def _dp5_loop(m, c, n, pw, obs, track, rtol, atol, h_init, h_fixed, relax_lag, r
     # inside it, a step cost 15-20 % more on N = 6 and 10-15 % more on N = 26 decorated chains
     # (~410 -> ~350 ns and ~750 -> ~670 ns, exact DP5, same-process timings), window or not.
     while status < 0:
-        # Views from granule lo on (contiguous, so the stage loops vectorise): X, V, C, IM, TR, XS, VS
+        # Views from granule lo on (contiguous, so the stage loops vectorise): X, V, C, IM, XS, VS
         # through the padding (the loops over the window), XM, VM, MM to the chain's end (the
         # routines that look for its last granule).
-        X, V, C, IM, TR = x[lo:], v[lo:], c[lo:], inv_m[lo:], track[lo:]
+        X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
         XS, VS = xs[lo:], vs[lo:]
         XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
         while status < 0:
@@ -482,19 +477,18 @@ def _dp5_loop(m, c, n, pw, obs, track, rtol, atol, h_init, h_fixed, relax_lag, r
                         peak_v[q] = vp
                         peak_t[q] = t + theta * h
                     front = max(front, q)
-            # Contact forces of the tracked contacts: compression maxima where v_j - v_{j+1} goes
-            # from + to -. The same vectorised count first (~80 % of the steps of an N = 26 decorated
-            # chain have no candidate among all its contacts; the contacts past the window, resting
-            # or padding, are never one). An ensemble tracks only the contacts it stores, half of a
-            # decorated chain's: ~4 % less per step at N = 26 (672 -> 645 ns, same-process timings).
+            # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -. The same
+            # vectorised count first (~80 % of the steps of an N = 26 decorated chain have no
+            # candidate; the contacts past the window, resting or padding, are never one, except the
+            # padding's with the last granule, which only lets the loop run).
             # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
             n_candidates = 0
             for j in range(hp):
-                n_candidates += falls(Kx[0, j] - Kx[0, j + 1], Kx[6, j] - Kx[6, j + 1]) & (TR[j] != 0)
+                n_candidates += falls(Kx[0, j] - Kx[0, j + 1], Kx[6, j] - Kx[6, j + 1])
             for j in range(hw - 1 if n_candidates > 0 else 0):
                 w0 = Kx[0, j] - Kx[0, j + 1]
                 w1 = Kx[6, j] - Kx[6, j + 1]
-                if falls(w0, w1) & (TR[j] != 0):
+                if falls(w0, w1):
                     # Screen: the cubic Hermite estimate of the compression maximum from the step ends
                     # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
                     d0 = X[j] - X[j + 1]
@@ -578,7 +572,7 @@ def _dp5_loop(m, c, n, pw, obs, track, rtol, atol, h_init, h_fixed, relax_lag, r
                 break
     X, V, C = x[lo:M], v[lo:M], c[lo:M - 1]  # the chain without padding (a cut in the last step left the views behind)
     final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
-    final_force_peaks(X, V, C, n, pw, lo, track, t, peak_rtol, peak_f, peak_ft)
+    final_force_peaks(X, V, C, n, pw, lo, t, peak_rtol, peak_f, peak_ft)
     for k in range(lo):  # the granules behind the window continued ballistically
         x[k] += v[k] * (t - t_frozen[k])
     write_info(info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential)

@@ -57,19 +57,6 @@ def gather_forces(peak_f, peak_ft, contacts, wall, force_out, force_time_out, wa
         wall_out[1] = peak_ft[last]
 
 
-@njit(**JIT)
-def tracked_contacts(M, contacts, wall):
-    """The contacts of a chain of M granules whose peak forces a batch stores (int8 flags, M-1): the
-    recorded ``contacts`` (0-based) and, with a wall, the wall's (the chain's last). The kernels search
-    no maxima for the others (:func:`gather_forces` never reads them)."""
-    tracked = np.zeros(M - 1, dtype=np.int8)
-    for q in range(contacts.shape[0]):
-        tracked[contacts[q]] = 1
-    if wall:
-        tracked[M - 2] = 1
-    return tracked
-
-
 @njit(**JIT_PARALLEL)
 def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, contacts, t_max, exit_margin, max_steps, peak_rtol,
                     t_grid, scale, n_threads, peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps,
@@ -109,10 +96,9 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, conta
         pft = np.zeros(M - 1)
         grid_f = np.zeros(T)
         info = np.zeros(INFO_SIZE)
-        wall = has_wall(m)
-        tracked = tracked_contacts(M, contacts, wall)
-        st = integrate_chain(kernel, params, m, c, n, pw, obs, tracked, t_max, True, exit_margin, max_steps, peak_rtol,
+        st = integrate_chain(kernel, params, m, c, n, pw, obs, t_max, True, exit_margin, max_steps, peak_rtol,
                              t_grid, x, v, peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info)
+        wall = has_wall(m)
         gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
         status[r] = st
         n_steps[r] = np.int64(info[INFO_STEPS])

@@ -56,8 +56,8 @@ def _hermite_force(j, x_old, v_old, x, v, h, theta, c, n, pw):
 
 
 @njit(**JIT)
-def verlet_integrate(m, c, n, pw, obs, tracked, h, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
-    """Fixed-step velocity Verlet; same contract as ``dp5_integrate`` (step h; ``tracked`` as there)."""
+def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
+    """Fixed-step velocity Verlet; same contract as ``dp5_integrate`` (step h)."""
     M = m.shape[0]
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
@@ -108,7 +108,7 @@ def verlet_integrate(m, c, n, pw, obs, tracked, h, t_max, stop_at_exit, exit_mar
         for j in range(hi - 1):
             w0 = v_old[j] - v_old[j + 1]
             w1 = v[j] - v[j + 1]
-            if (w0 > 0.0) & (w1 <= 0.0) & (tracked[j] != 0):
+            if (w0 > 0.0) & (w1 <= 0.0):
                 theta = w0 / (w0 - w1)
                 fp = _hermite_force(j, x_old, v_old, x, v, dt, theta, c, n, pw)
                 if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
@@ -138,6 +138,6 @@ def verlet_integrate(m, c, n, pw, obs, tracked, h, t_max, stop_at_exit, exit_mar
         if status >= 0:
             break
     final_peaks(obs, 0, v, a, t, peak_rtol, peak_v, peak_t)
-    final_force_peaks(x, v, c, n, pw, 0, tracked, t, peak_rtol, peak_f, peak_ft)
+    final_force_peaks(x, v, c, n, pw, 0, t, peak_rtol, peak_f, peak_ft)
     write_info(info, t, n_acc, 0, exit_since, n_eval, 0, 0.0)
     return status
