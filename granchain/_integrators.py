@@ -25,7 +25,7 @@ import numpy as np
 from ._kernels._common import INFO_SIZE, INFO_STEPS, INFO_T_END, final_energy, power_code
 from ._kernels._aligned import accumulate_aligned
 from ._kernels._dispatch import KERNEL_DP5, KERNEL_VERLET, integrate_chain
-from ._kernels._ensemble import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces, integrate_batch
+from ._kernels._ensemble import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces, integrate_batch, thread_sums
 from ._reference import dop853_integrate
 from ._validate import count, finite_scalar
 
@@ -177,18 +177,21 @@ class _Compiled(Integrator):
         import numba
 
         self.check_chains(masses, stiffness, n, initial_velocity)
+        lags, sum_a, sum_a2 = _aligned_outputs(out, observed.shape[0])
         # Dynamic scheduling, one realisation at a time. Realisations differ in cost by up to 16x
         # (N = 6 decorated chains), and Numba's default static split (each thread a contiguous
         # half of the batch) left a thread idle for 1.2-3.6 % of a 1000-realisation chunk of the
         # paper's set (computed from its per-realisation step counts; 0.1 % dynamic). Results do not
-        # change: realisations are independent and the sums are integers (test_ensemble).
+        # change: realisations are independent and the sums are integers (test_ensemble). The
+        # per-thread sums are allocated here, not in the kernel (see thread_sums).
         with numba.parallel_chunksize(1):
             integrate_batch(
                 self.kernel_id, self.kernel_params(), masses, stiffness, n, power_code(n), initial_velocity, observed,
                 contacts, t_max, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, scale,
-                numba.get_num_threads(), out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"],
-                out["peak_wall"], out["status"], out["energy_error"], out["n_steps"], out["t_end"], out["sum_v"],
-                out["sum_v2"], out["sum_wall"], out["n_valid"], *_aligned_outputs(out, observed.shape[0]),
+                out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
+                out["status"], out["energy_error"], out["n_steps"], out["t_end"], out["sum_v"], out["sum_v2"], out["sum_wall"],
+                out["n_valid"], lags, sum_a, sum_a2,
+                *thread_sums(numba.get_num_threads(), t_grid.size, observed.shape[0], lags.size),
             )
 
 
