@@ -183,6 +183,19 @@ def test_lilliefors_pvalues_are_calibrated_where_plain_ks_is_not():
     assert np.mean(plain) > 0.7  # estimated mean/std make the plain KS p-value far too large
 
 
+def test_lilliefors_pvalues_do_not_depend_on_threads():
+    """Fig. 4 runs the Monte Carlo of its panels in threads (figures/fig4.py): every panel must get
+    the p-value it gets alone. Samples near the 5-10 % point, where p depends on every resample."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    samples = [np.random.default_rng(s).standard_t(15, size=500) for s in range(4)]
+    alone = [A.ks_normal(x, n_mc_samples=300) for x in samples]
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        threaded = list(pool.map(lambda x: A.ks_normal(x, n_mc_samples=300), samples))
+    assert threaded == alone
+    assert len({r.pvalue for r in alone}) > 1 and all(1 / 301 < r.pvalue < 1 for r in alone)  # not all at a bound
+
+
 def test_d_falls_like_inverse_sqrt_n_for_gaussian_samples():
     d = {n: np.mean([A.ks_distance(np.random.default_rng(s).normal(size=n)) for s in range(20)])
          for n in (400, 6400)}
