@@ -463,14 +463,11 @@ class ZarrSink:
     def _write_fill(self, path, sl):
         """Write the not-computed value of every per-realisation variable in ``sl`` explicitly, so that
         every reader (xarray, zarr) sees status = -1, n_steps = -1 and NaN there."""
-        import zarr
-
-        group = zarr.open_group(path, mode="r+", zarr_format=2, use_consolidated=False)
         for v in per_realisation_variables(self.spec.family):
             arr = writable_array(path, v.name)
             region = _region(v.dims, "realization", sl)
             shape = tuple(s.stop - s.start if isinstance(s, slice) and s.stop is not None else n
-                          for s, n in zip(region, group[v.name].shape))
+                          for s, n in zip(region, arr.shape))
             arr[region] = np.full(shape, v.fill, dtype=v.dtype)
 
     # ------------------------------------------------------------------ resume
@@ -578,8 +575,6 @@ class ZarrSink:
         return check_chunk(self.path, group, j, names, spec.chunk_slice(j))
 
     def _mark_undone(self, chunks):
-        import zarr
-
         done = writable_array(self.path, "progress/done")
         for j in chunks:
             done[j] = 0
@@ -643,16 +638,17 @@ class ZarrSink:
         threads of the next chunk waited)."""
         spec, j = self.spec, res["chunk"]
         sl = spec.chunk_slice(j)
-        values = {v.name: np.asarray(res[v.name]).astype(v.dtype, copy=False) for v in per_realisation_variables(spec.family)}
+        variables, sums = per_realisation_variables(spec.family), progress_sums(spec)
+        values = {v.name: np.asarray(res[v.name]).astype(v.dtype, copy=False) for v in variables}
         # One chunk's sums, with a leading chunk axis (n_valid is (chain, 1) in the result).
         table = {v.name: v for v in progress_variables(spec)}
-        for name in progress_sums(spec):
+        for name in sums:
             values[f"progress/{name}"] = np.asarray(res[name].T if name == "n_valid" else res[name][None], dtype=table[name].dtype)
         check = np.array([[digest(values[name], values[name].dtype) for name in checked_variables(spec)]], dtype=np.int64)
-        for v in per_realisation_variables(spec.family):
+        for v in variables:
             self._array(v.name)[_region(v.dims, "realization", sl)] = values[v.name]
         here = slice(j, j + 1)
-        for name in progress_sums(spec):
+        for name in sums:
             self._array(f"progress/{name}")[_region(table[name].dims, "chunk", here)] = values[f"progress/{name}"]
         self._array("progress/checksum")[here] = check
         # The flag last: a chunk counts as done only once all its data and checksums are on disk.

@@ -93,6 +93,8 @@ def test_fig4_clockwise_order_common_range_and_sign(stores):
         assert np.array_equal(p.hist_numerics.edges, p.hist_theory.edges)
         assert p.numerics.size == p.theory.size
         assert p.stats["shift"].value == pytest.approx(p.shifted.shift)
+        # each panel's Lilliefors test (computed in threads) is the one its own sample gets alone
+        assert p.ks == analysis.ks_normal(p.numerics, n_mc_samples=20)
     fig = fig4.plot(data)
     fig.canvas.draw()
     centre = {p.N: ax.get_position() for p, ax in zip(data.panels, fig.axes)}
