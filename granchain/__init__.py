@@ -11,7 +11,7 @@ from ._effective import effective, effective_parameters
 from ._random import draw_small_radii, random_decorated, realization_rng
 from ._status import Status
 from ._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
-from ._integrators import DOP853, DP5, INTEGRATORS, Integrator, RunControls, Verlet, VerletStabilityWarning, get_integrator
+from ._integrators import DOP853, DP5, INTEGRATORS, RKN4, Integrator, RunControls, Verlet, VerletStabilityWarning, get_integrator
 from ._simulate import PulseResult, default_t_max, simulate
 from .families import (
     FAMILIES,
@@ -34,6 +34,7 @@ __all__ = [
     "CustomFamily",
     "DOP853",
     "DP5",
+    "RKN4",
     "EFFECTIVE_VALIDITY_LIMIT",
     "ENSEMBLE_ATOL",
     "ENSEMBLE_RTOL",

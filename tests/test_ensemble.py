@@ -47,7 +47,7 @@ PER_REALISATION = ("small_radius", "peak_velocity", "peak_time", "status", "ener
 AVERAGED = ("mean_velocity", "mean_velocity_stderr", "n_valid")
 COORDS = ("chain", "realization", "granule", "gap", "time")
 FIXED_POINT_ULP = 2.0**-40  # the fixed-point resolution of the velocity sums (fixed_point_bits = 40)
-DP5_ENSEMBLE = gc.DP5.relaxed(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL)  # the ensembles' default integrator (decorated chains)
+DEFAULT_DECORATED = gc.RKN4.relaxed(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL)  # the ensembles' default integrator (decorated chains)
 
 
 @pytest.fixture(autouse=True)
@@ -343,7 +343,7 @@ def test_decorated_and_effective_chains_agree():
     mean peak velocities by <= 0.2 % at k = 2..N-1 and 0.5 % at the free end k = N (the effective
     chain's last granule is faster), averaged-pulse peaks by <= 0.71 %, their times by one grid
     step. k = 1 (struck) and k = N (free end) are excluded from the arrival times, as in the
-    paper's fits."""
+    paper's fits, and from the times of the averaged-pulse peaks."""
     n_large = 11
     ds = gc.run_ensemble(n_large, realizations=300, seed=2024, chunk_size=100, progress=False)
     assert np.all(ds["status"].values == 0)
@@ -362,9 +362,11 @@ def test_decorated_and_effective_chains_agree():
     a_dec, a_eff = dec["mean_velocity"].max("time").values, eff["mean_velocity"].max("time").values
     da = np.abs(a_eff / a_dec - 1)[1:]
     assert da.max() < 0.015, f"averaged-pulse peaks differ by {da.max():.2%}"
-    tm = np.abs(dec["mean_velocity"].idxmax("time").values - eff["mean_velocity"].idxmax("time").values)
+    tm = np.abs(dec["mean_velocity"].idxmax("time").values - eff["mean_velocity"].idxmax("time").values)[inner]
     step = float(np.diff(ds["time"].values).max())
     assert tm.max() <= max(0.1, step) + 1e-9, tm  # within one grid step (or 0.1)
+    # (not at the free end: its <v_N(t)> ends on a plateau, the last granule flying off, flat to ~1e-8
+    # over several time units, where the time of the maximum is set by differences at that level)
     # the two amplitudes of DESIGN.md Sec. 2 are different things: the averaged pulse decays faster
     assert np.all(a_dec[2:] < v_dec[2:])
 
@@ -385,10 +387,10 @@ def test_every_variable_is_described(local):
     assert params["family"] == json.loads(local.attrs["granchain_family"]) == gc.RandomDecorated(N).describe()
     assert params["family"]["n_large"] == N == local.attrs["n_large"]
     integrator = json.loads(local.attrs["granchain_integrator"])
-    assert integrator == params["integrator"] == {"name": "dp5", "rtol": gc.ENSEMBLE_RTOL, "atol": gc.ENSEMBLE_ATOL,
+    assert integrator == params["integrator"] == {"name": "rkn4", "rtol": gc.ENSEMBLE_RTOL, "atol": gc.ENSEMBLE_ATOL,
                                                    "first_step": 1e-3, "fixed_step": None, "relaxed_lag": 4,
                                                    "relaxed_factor": 1000.0, "window_lag": None}
-    assert local.attrs["rtol"] == gc.ENSEMBLE_RTOL and local.attrs["integrator"] == "dp5"
+    assert local.attrs["rtol"] == gc.ENSEMBLE_RTOL and local.attrs["integrator"] == "rkn4"
     assert local.attrs["granchain_version"] == gc.__version__
 
 
@@ -444,7 +446,7 @@ def test_failed_realisations_are_recorded_not_fatal():
     scale = 2.0**spec.fixed_point_bits
     expected = np.zeros_like(out["sum_v"][0])
     for i in np.flatnonzero(ok):
-        r = gc.simulate(gc.random_decorated(N, seed=3, realization=i), DP5_ENSEMBLE, t_grid=spec.t_grid)
+        r = gc.simulate(gc.random_decorated(N, seed=3, realization=i), DEFAULT_DECORATED, t_grid=spec.t_grid)
         expected += np.rint(r.velocity * scale).astype(np.int64)
     np.testing.assert_array_equal(out["sum_v"][0], expected)
 

@@ -22,6 +22,7 @@ import granchain as gc
 # the registry must be listed here (or in ADAPTIVE_ONLY), so its order gets measured.
 FIXED_STEP = {
     "dp5": lambda h: gc.DP5(fixed_step=h),
+    "rkn4": lambda h: gc.RKN4(fixed_step=h),
     "verlet": lambda h: gc.Verlet(dt=h),
 }
 ADAPTIVE_ONLY = {"dop853"}  # SciPy's DOP853: no fixed-step mode; checked for a tiny error instead
@@ -139,18 +140,39 @@ def test_dp5_error_norm_keeps_a_nan(where):
     """A NaN ratio anywhere makes the error norm infinite (the step is refused as non-finite), also when
     finite ratios follow it (the max loop once let a later finite ratio overwrite the NaN); with all
     ratios finite the norm is their maximum, wherever it is."""
-    from granchain._kernels._dp5 import _error_norm
+    from granchain._kernels._dp5 import METHOD_DP5, _error_norm
 
     hi = 50
     rng = np.random.default_rng(where)
     x, v, xs, vs = (rng.random(hi) for _ in range(4))
     Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
     ratio = np.zeros(2 * hi)
-    err = _error_norm(x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
+    err = _error_norm(METHOD_DP5, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
     assert err == ratio.max() and math.isfinite(err)
     (Kx if where < hi else Kv)[3, where % hi] = np.nan
-    assert _error_norm(x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == math.inf
+    assert _error_norm(METHOD_DP5, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == math.inf
     assert np.isnan(ratio[where]) and np.isfinite(np.delete(ratio, where)).all()
+
+
+@pytest.mark.parametrize("where", [0, 1, 17, 49])
+def test_rkn4_error_norm_keeps_a_nan(where):
+    """The same for RKN4's error estimate, which reads the stage accelerations Kv[0..3] only: a NaN
+    there makes both the position and the velocity ratio of that granule NaN and the norm infinite."""
+    from granchain._kernels._dp5 import METHOD_RKN4, _error_norm
+
+    hi = 50
+    rng = np.random.default_rng(where)
+    x, v, xs, vs = (rng.random(hi) for _ in range(4))
+    Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
+    ratio = np.zeros(2 * hi)
+    err = _error_norm(METHOD_RKN4, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
+    assert err == ratio.max() and math.isfinite(err)
+    Kx[:, where] = np.nan  # not read by RKN4
+    Kv[4:, where] = np.nan
+    assert _error_norm(METHOD_RKN4, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == err
+    Kv[3, where] = np.nan
+    assert _error_norm(METHOD_RKN4, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == math.inf
+    assert np.isnan(ratio[where]) and np.isnan(ratio[hi + where])
 
 
 @settings(max_examples=60, deadline=None)
@@ -169,7 +191,7 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
     with np.errstate(over="ignore", under="ignore"):
         Kx = np.ldexp(Kx, exponent)  # scaled by 2^exponent: subnormal ... inf
     h, rtol, atol, factor = 1e-3, 1e-6, 1e-9, 1000.0
-    err = _dp5._error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, np.zeros(2 * hi))
+    err = _dp5._error_norm(_dp5.METHOD_DP5, x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, np.zeros(2 * hi))
 
     E = (_dp5.E1, _dp5.E3, _dp5.E4, _dp5.E5, _dp5.E6, _dp5.E7)
     rows = (0, 2, 3, 4, 5, 6)
@@ -193,7 +215,8 @@ from granchain._kernels import _dp5
 assert numba.config.DISABLE_JIT
 cases = {f"decorated N={k}": gc.decorated([0.3, 0.2, 0.35, 0.25, 0.3, 0.22][: k - 1]) for k in (2, 3, 4, 5, 6, 7)}
 cases.update({f"monodisperse {k}": gc.monodisperse(k) for k in (2, 4, 6, 8, 9)})
-integrators = {"exact": gc.DP5(1e-6, 1e-9), "windowed": gc.DP5(1e-6, 1e-9, relaxed_lag=1, window_lag=2)}
+integrators = {"exact": gc.DP5(1e-6, 1e-9), "windowed": gc.DP5(1e-6, 1e-9, relaxed_lag=1, window_lag=2),
+               "rkn4": gc.RKN4(1e-5, 1e-8), "rkn4-windowed": gc.RKN4(1e-5, 1e-8, relaxed_lag=1, window_lag=2)}
 def run(chain, integ):
     x, v = np.zeros(chain.size), np.zeros(chain.size)
     v[0] = chain.initial_velocity

@@ -31,7 +31,7 @@ SCRIPT = textwrap.dedent(
     from granchain._kernels import _common, _dp5, _verlet
 
     assert numba.config.DISABLE_JIT
-    for f in (_dp5.dp5_integrate, _verlet.verlet_integrate, _common.accelerations):
+    for f in (_dp5.rk_integrate, _verlet.verlet_integrate, _common.accelerations):
         assert inspect.isfunction(f), type(f)
 
     chains = {chains}
@@ -57,7 +57,7 @@ def nojit_results(run_without_jit):
 def test_compiled_in_this_process():
     from granchain._kernels import _dp5
 
-    assert hasattr(_dp5.dp5_integrate, "py_func")  # a Numba dispatcher here
+    assert hasattr(_dp5.rk_integrate, "py_func")  # a Numba dispatcher here
 
 
 @pytest.mark.parametrize("integrator", INTEGRATORS)

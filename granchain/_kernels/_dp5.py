@@ -1,4 +1,5 @@
-"""Dormand-Prince 5(4) for one chain: PI step control, max-norm error, dense output.
+"""Dormand-Prince 5(4) for one chain: PI step control, max-norm error, dense output. The same step
+loop runs the Runge-Kutta-Nystrom pair RKN4(3) (``_rkn``: its stages, error and dense output).
 
 Coefficients: J. R. Dormand and P. J. Prince, J. Comput. Appl. Math. 6, 19
 (1980); continuous extension of order 4 from L. F. Shampine, Math. Comp. 46, 135
@@ -48,6 +49,7 @@ from ._common import (
     write_info,
 )
 from ._jit import JIT, JIT_INLINE
+from . import _rkn
 
 ORDER = 5
 
@@ -83,7 +85,8 @@ SAFETY = 0.9
 #: estimate of that maximum reaches this fraction of the contact's recorded peak compression.
 SCREEN = 0.9
 BETA = 0.08  # PI controller: Gustafsson's value, few rejections when stability limits the step
-ALPHA = 0.2 - 0.75 * BETA
+ALPHA = 0.2 - 0.75 * BETA  # error estimate O(h^5)
+ALPHA_RKN4 = 0.25 - 0.75 * BETA  # RKN4(3): error estimate O(h^4)
 MIN_FACTOR = 0.2
 MAX_FACTOR = 10.0
 #: Bit masks of a float64 (``_error_norm``): all but the sign; the exponent of inf and NaN.
@@ -97,6 +100,13 @@ EXPONENT_ALL_ONES = 0x7FF0_0000_0000_0000
 #: (``_common.WINDOW_MARGIN``) or padding past the chain's end (zero stiffness, zero inverse mass):
 #: every stage gives them exact zeros, so the results are bitwise those of the unpadded loops.
 LANES = 8
+
+
+#: The methods the step loop runs (``rk_integrate``'s ``method``): DP5 (this module's tables) or
+#: the Runge-Kutta-Nystrom pair RKN4(3) (``_rkn``), which shares everything but the stages, the error
+#: estimate and the dense output.
+METHOD_DP5 = 0
+METHOD_RKN4 = 1
 
 
 @njit(**JIT_INLINE)
@@ -121,10 +131,21 @@ def dense_value(y0, K, k, h, Q):
 
 
 @njit(**JIT)
-def _dense_accel(theta, k, x, Kx, h, c, inv_m, n, pw, Q):
+def weights(method, theta, Qx, Qv):
+    """Dense-output weights at t + theta h: positions x + h sum_s Kx[s] Qx[s], velocities
+    v + h sum_s Kv[s] Qv[s]. DP5 has one set (``Qv`` is ``Qx``: filled once); RKN4 its Hermite pair
+    (``_rkn.hermite_weights``)."""
+    if method == METHOD_RKN4:
+        _rkn.hermite_weights(theta, Qx, Qv)
+    else:
+        dense_weights(theta, Qx)
+
+
+@njit(**JIT)
+def _dense_accel(method, theta, k, x, Kx, h, c, inv_m, n, pw, Q, Qv):
     """Acceleration of granule k at t + theta h from the dense-output positions."""
     M = x.shape[0]
-    dense_weights(theta, Q)
+    weights(method, theta, Q, Qv)
     xk = dense_value(x[k], Kx, k, h, Q)
     left = 0.0
     right = 0.0
@@ -142,17 +163,18 @@ ROOT_APPROACH = 1
 
 
 @njit(**JIT)
-def _root_function(what, i, theta, x, v, Kx, Kv, h, c, inv_m, n, pw, Q):
-    """The followed function at t + theta h on the dense output: the acceleration of granule i, or
-    the relative velocity v_i - v_{i+1} of contact i."""
+def _root_function(method, what, i, theta, x, v, Kx, Kv, h, c, inv_m, n, pw, Q, Qv):
+    """The followed function at t + theta h on the dense output (weights ``Q`` for positions, ``Qv``
+    for velocities, see :func:`weights`): the acceleration of granule i, or the relative velocity
+    v_i - v_{i+1} of contact i."""
     if what == ROOT_ACCELERATION:
-        return _dense_accel(theta, i, x, Kx, h, c, inv_m, n, pw, Q)
-    dense_weights(theta, Q)
-    return dense_value(v[i], Kv, i, h, Q) - dense_value(v[i + 1], Kv, i + 1, h, Q)
+        return _dense_accel(method, theta, i, x, Kx, h, c, inv_m, n, pw, Q, Qv)
+    weights(method, theta, Q, Qv)
+    return dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
 
 
 @njit(**JIT)
-def _first_root(what, i, f0, f1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q):
+def _first_root(method, what, i, f0, f1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q, Qv):
     """First theta in [0, 1] where the followed function (+ at 0, <= 0 at 1) stops being positive:
     a granule's velocity maximum (``ROOT_ACCELERATION``) or a contact's compression maximum
     (``ROOT_APPROACH``).
@@ -172,7 +194,7 @@ def _first_root(what, i, f0, f1, x, v, Kx, Kv, h, c, inv_m, n, pw, Q):
                 theta = 0.5 * (lo + hi)
         else:
             theta = 0.5 * (lo + hi)
-        f = _root_function(what, i, theta, x, v, Kx, Kv, h, c, inv_m, n, pw, Q)
+        f = _root_function(method, what, i, theta, x, v, Kx, Kv, h, c, inv_m, n, pw, Q, Qv)
         if f > 0.0:
             lo, f_lo = theta, f
             if side == -1:
@@ -210,7 +232,7 @@ def hermite_max_estimate(d0, w0, d1, w1, h):
 @njit(**JIT)
 def _dense_compression(j, x, Kx, h, Q):
     """Compression x_j - x_{j+1} of contact j from the dense-output positions at the time whose
-    weights ``Q`` holds (``dense_weights(theta, Q)`` already called)."""
+    weights ``Q`` holds (``weights(method, theta, Q, Qv)`` already called)."""
     return dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
 
 
@@ -259,25 +281,21 @@ def _stages(x, v, Kx, Kv, xs, vs, h, hi, c, inv_m, n, pw, F):
 
 
 @njit(**JIT_INLINE)
-def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
+def _error_norm(method, x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
     """Max over components of |embedded error| / (w_i (atol + rtol max(|y|, |y_new|))); inf if the new
     state is not finite. w_i = ``factor`` for the granules of the relaxed zone (0..relaxed-1), else 1
-    (multiplying by 1 is exact: without a relaxed zone the norm is bitwise the plain one).
+    (multiplying by 1 is exact: without a relaxed zone the norm is bitwise the plain one). RKN4's
+    ratios come from ``_rkn.error_ratios``.
 
     The ratios go through the scratch array ``ratio`` so that the division loop vectorises; their
     maximum is then an integer maximum of their bit patterns (below; ``ratio[0]`` is overwritten with
     it). A NaN ratio (a non-finite state) is never lost to a later finite one: its pattern is above
     every finite one.
     """
-    for i in range(hi):  # positions, then velocities: two loops of few streams each vectorise
-        w = factor if i < relaxed else 1.0
-        ex = h * (E1 * Kx[0, i] + E3 * Kx[2, i] + E4 * Kx[3, i] + E5 * Kx[4, i] + E6 * Kx[5, i] + E7 * Kx[6, i])
-        ratio[i] = abs(ex) / ((atol + rtol * max(abs(x[i]), abs(xs[i]))) * w)
-    rv = ratio[hi:]
-    for i in range(hi):
-        w = factor if i < relaxed else 1.0
-        ev = h * (E1 * Kv[0, i] + E3 * Kv[2, i] + E4 * Kv[3, i] + E5 * Kv[4, i] + E6 * Kv[5, i] + E7 * Kv[6, i])
-        rv[i] = abs(ev) / ((atol + rtol * max(abs(v[i]), abs(vs[i]))) * w)
+    if method == METHOD_RKN4:
+        _rkn.error_ratios(x, v, xs, vs, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
+    else:
+        _dp5_error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
     # The maximum of the bit patterns (sign cleared): for non-negative doubles their order is the
     # order of the numbers, inf and NaN above every finite one, and an integer maximum can vectorise
     # (a floating-point one cannot without fast-math; measured, no faster than the float loop it
@@ -292,6 +310,20 @@ def _error_norm(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
     return ratio[0]
 
 
+@njit(**JIT_INLINE)
+def _dp5_error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
+    """DP5's error ratios of positions (ratio[0:hi]) and velocities (ratio[hi:2 hi]), see :func:`_error_norm`."""
+    for i in range(hi):  # positions, then velocities: two loops of few streams each vectorise
+        w = factor if i < relaxed else 1.0
+        ex = h * (E1 * Kx[0, i] + E3 * Kx[2, i] + E4 * Kx[3, i] + E5 * Kx[4, i] + E6 * Kx[5, i] + E7 * Kx[6, i])
+        ratio[i] = abs(ex) / ((atol + rtol * max(abs(x[i]), abs(xs[i]))) * w)
+    rv = ratio[hi:]
+    for i in range(hi):
+        w = factor if i < relaxed else 1.0
+        ev = h * (E1 * Kv[0, i] + E3 * Kv[2, i] + E4 * Kv[3, i] + E5 * Kv[4, i] + E6 * Kv[5, i] + E7 * Kv[6, i])
+        rv[i] = abs(ev) / ((atol + rtol * max(abs(v[i]), abs(vs[i]))) * w)
+
+
 @njit(**JIT)
 def _open_contact_behind(x, lo, target):
     """The window start for a cut just behind granule ``target`` (0-based, in the chain): j + 1 for
@@ -304,9 +336,11 @@ def _open_contact_behind(x, lo, target):
 
 
 @njit(**JIT)
-def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
-                  exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
-    """Integrate one chain from the state (x, v) at t = 0.
+def rk_integrate(method, m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max,
+                 stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft,
+                 grid_f, info):
+    """Integrate one chain from the state (x, v) at t = 0 with ``method`` (:data:`METHOD_DP5`, or
+    :data:`METHOD_RKN4`: the Runge-Kutta-Nystrom pair of ``_rkn``, same loop, step control and records).
 
     ``x``, ``v`` (length M) hold the initial state and receive the final one.
     For each observed granule q (0-based index obs[q]) the kernel writes the
@@ -355,18 +389,24 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, rela
     vs = np.zeros(Mp)
     F = np.zeros(Mp + 1)  # contact forces, F[j + 1] for contact j (see _common.accelerations)
     Q = np.zeros(7)
+    Qv = np.zeros(7)  # RKN4's velocity weights (DP5 uses Q for both)
     ratio = np.zeros(2 * Mp)
     peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
     t_frozen = np.zeros(M)  # time each granule left the trailing window
     # The step loop works on borrowed views (see _common.borrowed): the arguments are held by
     # our caller, the scratch arrays above by the keep_alive call after the loop.
-    status = _dp5_loop(
-        borrowed(m), borrowed(cp), n, pw, borrowed(obs), rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
-        t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, borrowed(t_grid), borrowed(xp), borrowed(vp),
-        borrowed(peak_v), borrowed(peak_t), borrowed(grid_v), borrowed(peak_f), borrowed(peak_ft), borrowed(grid_f),
-        borrowed(info), borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F),
-        borrowed(Q), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
-    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen)
+    bm, bc, bobs, bt, bx, bv = borrowed(m), borrowed(cp), borrowed(obs), borrowed(t_grid), borrowed(xp), borrowed(vp)
+    bpv, bpt, bgv, bpf, bpft = borrowed(peak_v), borrowed(peak_t), borrowed(grid_v), borrowed(peak_f), borrowed(peak_ft)
+    bgf, binfo = borrowed(grid_f), borrowed(info)
+    scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
+               borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
+    if method == METHOD_RKN4:
+        status = _rkn4_loop(bm, bc, n, pw, bobs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
+                            exit_margin, max_steps, peak_rtol, bt, bx, bv, bpv, bpt, bgv, bpf, bpft, bgf, binfo, scratch)
+    else:
+        status = _dp5_loop(bm, bc, n, pw, bobs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
+                           exit_margin, max_steps, peak_rtol, bt, bx, bv, bpv, bpt, bgv, bpf, bpft, bgf, binfo, scratch)
+    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen)
     x[:] = xp[:M]
     v[:] = vp[:M]
     return status
@@ -375,13 +415,38 @@ def dp5_integrate(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, rela
 @njit(**JIT)
 def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
               exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
-              inv_m, Kx, Kv, xs, vs, F, Q, ratio, peak_d, t_frozen):
-    """The step loop of :func:`dp5_integrate`, on borrowed arrays (``_common.borrowed``: no reference
+              scratch):
+    """:func:`_rk_loop` with DP5."""
+    return _rk_loop(METHOD_DP5, m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
+                    t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v,
+                    peak_f, peak_ft, grid_f, info, scratch)
+
+
+@njit(**JIT)
+def _rkn4_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
+               exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
+               scratch):
+    """:func:`_rk_loop` with RKN4(3)."""
+    return _rk_loop(METHOD_RKN4, m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
+                    t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v,
+                    peak_f, peak_ft, grid_f, info, scratch)
+
+
+# Inlined into the two loops above, each with its method a constant, so that the compiler drops the
+# other method's branches (compiled once with the method a run-time value, the loop cost DP5 ~6 %
+# more per realisation, same-process timing at N = 26).
+@njit(**JIT_INLINE)
+def _rk_loop(method, m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max,
+             stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft,
+             grid_f, info, scratch):
+    """The step loop of :func:`rk_integrate`, on borrowed arrays (``_common.borrowed``: no reference
     counting in the loop): its arguments, with the state ``x``, ``v``, the stiffness ``c`` and the
     inverse masses ``inv_m`` = 1 / m in the padded layout (length Mp = M + LANES, see :data:`LANES`),
     and the zeroed scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``, ``vs`` (Mp);
-    ``peak_d``, ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q`` (7);
-    error ratios ``ratio`` (2 Mp))."""
+    ``peak_d``, ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv``
+    (7); error ratios ``ratio`` (2 Mp)) in the tuple ``scratch``. (One tuple: CPython passes a call of
+    more than 30 arguments as ``f(*args)``, which Numba cannot inline.)"""
+    inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen = scratch
     M = m.shape[0]
     Mp = x.shape[0]
     n_obs = obs.shape[0]
@@ -391,6 +456,8 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
     # window-local (shifted to start at lo at each cut); the other arrays are read through views from
     # granule lo on, taken in the step loop below.
     wall = has_wall(m)
+    QV = Qv if method == METHOD_RKN4 else Q  # velocity weights (see weights)
+    alpha = ALPHA_RKN4 if method == METHOD_RKN4 else ALPHA  # PI controller exponent of the error estimate
     goal = (relax_lag > 0 or window_lag > 0) and not wall
     lo = 0
     hi = initial_window(x[:M], v[:M])
@@ -438,25 +505,31 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
             hw = hi - lo
             hp = padded_width(hw)
             # Stages 2..7 (stage 7 is the new solution, reused as stage 1 next step).
-            _stages(X, V, Kx, Kv, XS, VS, h, hp, C, IM, n, pw, F)
-            n_eval += 6
+            if method == METHOD_RKN4:
+                _rkn.stages(X, V, Kv, XS, VS, h, hp, C, IM, n, pw, F)
+                n_eval += 3
+            else:
+                _stages(X, V, Kx, Kv, XS, VS, h, hp, C, IM, n, pw, F)
+                n_eval += 6
             # xs, vs now hold the 5th-order solution at t + h.
             accept = True
             err = 0.0
             if h_fixed <= 0.0:
-                err = _error_norm(X, V, XS, VS, Kx, Kv, h, hp, relaxed, relax_factor, rtol, atol, ratio)
+                err = _error_norm(method, X, V, XS, VS, Kx, Kv, h, hp, relaxed, relax_factor, rtol, atol, ratio)
                 if not math.isfinite(err):
                     status = NONFINITE
                     break
                 accept = err <= 1.0
             if not accept:
                 n_rej += 1
-                h *= max(MIN_FACTOR, SAFETY * err**-ALPHA)
+                h *= max(MIN_FACTOR, SAFETY * err**-alpha)
                 if h < 1e-14 * max(1.0, t):
                     status = STEP_UNDERFLOW
                 continue
 
             # Accepted: peaks and grid samples from the dense output over [t, t + h].
+            if method == METHOD_RKN4:
+                _rkn.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
             # Velocity maxima where an acceleration goes from + to -: a vectorised count over every
             # granule of the window (zeros past it) first; the loop over the observed granules runs
             # only when it finds one (1.6 % of the steps of an N = 26 decorated chain have one there).
@@ -470,9 +543,9 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 a0 = Kv[0, k]
                 a1 = Kv[6, k]
                 if falls(a0, a1):
-                    theta = _first_root(ROOT_ACCELERATION, k, a0, a1, X, V, Kx, Kv, h, C, IM, n, pw, Q)
-                    dense_weights(theta, Q)
-                    vp = dense_value(V[k], Kv, k, h, Q)
+                    theta = _first_root(method, ROOT_ACCELERATION, k, a0, a1, X, V, Kx, Kv, h, C, IM, n, pw, Q, QV)
+                    weights(method, theta, Q, QV)
+                    vp = dense_value(V[k], Kv, k, h, QV)
                     if is_new_peak(vp, peak_v[q], peak_rtol):
                         peak_v[q] = vp
                         peak_t[q] = t + theta * h
@@ -495,8 +568,8 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                     d1 = XS[j] - XS[j + 1]
                     if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
                         continue
-                    theta = _first_root(ROOT_APPROACH, j, w0, w1, X, V, Kx, Kv, h, C, IM, n, pw, Q)
-                    dense_weights(theta, Q)
+                    theta = _first_root(method, ROOT_APPROACH, j, w0, w1, X, V, Kx, Kv, h, C, IM, n, pw, Q, QV)
+                    weights(method, theta, Q, QV)
                     dp = _dense_compression(j, X, Kx, h, Q)
                     fp = contact_force(dp, C[j], n, pw)  # Eq. (motion_rescaled): c_j delta^(n-1)
                     if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
@@ -505,13 +578,13 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                         peak_d[lo + j] = dp
             while g < n_grid and t_grid[g] <= t + h:
                 theta = (t_grid[g] - t) / h
-                dense_weights(theta, Q)
+                weights(method, theta, Q, QV)
                 for q in range(n_obs):
                     k = obs[q] - lo
                     if k < 0:  # behind the window: the velocity it left with
                         grid_v[g, q] = v[obs[q]]
                     else:
-                        grid_v[g, q] = dense_value(V[k], Kv, k, h, Q) if k < hw else 0.0
+                        grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
                 if wall:
                     grid_f[g] = contact_force(_dense_compression(M - 2 - lo, X, Kx, h, Q), C[M - 2 - lo], n, pw) if M - 2 < hi else 0.0
                 g += 1
@@ -564,7 +637,7 @@ def _dp5_loop(m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, relax_fa
                 break
 
             if h_fixed <= 0.0:
-                fac = SAFETY * max(err, 1e-10) ** -ALPHA * err_old**BETA
+                fac = SAFETY * max(err, 1e-10) ** -alpha * err_old**BETA
                 fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
                 h *= fac
                 err_old = max(err, 1e-4)

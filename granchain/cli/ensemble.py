@@ -54,17 +54,18 @@ def add_parser(subparsers) -> None:
     p.add_argument("--realizations", type=int, default=1000, help="number of random chains (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random parameters (default 0)")
     integ = p.add_argument_group("integrator")
-    integ.add_argument("--integrator", choices=sorted(INTEGRATORS), default="dp5", help="integrator (default dp5)")
+    integ.add_argument("--integrator", choices=sorted(INTEGRATORS), default=None,
+                       help="integrator (default: rkn4 for decorated chains, dp5 for the others)")
     integ.add_argument("--rtol", type=float, default=None,
-                       help="relative tolerance, for every chain kind (dp5 default: 1e-6 for decorated chains, 5e-8 for the "
-                            "others; dop853)")
+                       help="relative tolerance, for every chain kind (defaults: decorated chains rkn4 1e-5, dp5 1e-6; "
+                            "the others 5e-8; dop853)")
     integ.add_argument("--atol", type=float, default=None,
-                       help="absolute tolerance (dp5 default: 1e-9 for decorated chains, 5e-11 for the others; dop853)")
+                       help="absolute tolerance (defaults: decorated chains rkn4 1e-8, dp5 1e-9; the others 5e-11; dop853)")
     integ.add_argument("--error-control", choices=("relaxed", "windowed", "exact"), default="relaxed",
-                       help="dp5 only. relaxed (default): looser tolerance for the granules the pulse has passed; windowed: "
-                            "also drop them from the integration a few granules behind the pulse (cost linear in N; "
-                            "peaks as accurate, the averaged pulse's tail not kept); exact: every granule to the end at "
-                            "full tolerance (granchain < 0.3)")
+                       help="dp5 and rkn4 only. relaxed (default): looser tolerance for the granules the pulse has passed; "
+                            "windowed: also drop them from the integration a few granules behind the pulse (cost linear "
+                            "in N; peaks as accurate, the averaged pulse's tail not kept); exact: every granule to the end "
+                            "at full tolerance (--integrator dp5 --rtol 1e-6 --atol 1e-9: granchain < 0.3)")
     integ.add_argument("--step", type=float, default=None, help="time step (verlet; default 1e-3)")
     p.add_argument("--chunk-size", type=int, default=500, help="realisations per chunk, the unit of saving (default 500)")
     p.add_argument("--t-end", type=float, default=None, help="end of the time grid of the averaged pulse (default: past the pulse's exit)")
@@ -143,30 +144,39 @@ def build_family(args):
 
 
 def build_integrator(args, chains):
-    """The integrator the arguments name, with its settings: for DP5 without --rtol/--atol a
-    {chain kind: integrator} dict of each kind's ensemble default (``ensemble_integrator``) with the
-    --error-control settings."""
+    """The integrator the arguments name, with its settings. Without --integrator (or with dp5 or rkn4)
+    and without --rtol/--atol: a {chain kind: integrator} dict of each kind's ensemble default
+    (``ensemble_integrator``: rkn4 for decorated chains, dp5 for the others), or of the named
+    method at that kind's tolerances, with the --error-control settings. --rtol/--atol without
+    --integrator set DP5's (as ``run_ensemble(rtol=...)``)."""
     import dataclasses
 
-    from .._ensemble import ensemble_integrator
+    from .._ensemble import SMOOTH_ATOL, SMOOTH_RTOL, ensemble_integrator
     from .._integrators import DP5, INTEGRATORS, WINDOW_LAG
 
-    cls = INTEGRATORS[args.integrator]
+    cls = None if args.integrator is None else INTEGRATORS[args.integrator]
     given = {"rtol": args.rtol, "atol": args.atol, "dt": args.step}
-    fields = {f.name for f in dataclasses.fields(cls)}
+    fields = {f.name for f in dataclasses.fields(cls or DP5)}
     wrong = [f"--{'step' if k == 'dt' else k}" for k, v in given.items() if v is not None and k not in fields]
-    if args.error_control != "relaxed" and cls is not DP5:
+    adaptive = cls is None or issubclass(cls, DP5)  # DP5 and RKN4: the goal-oriented settings
+    if args.error_control != "relaxed" and not adaptive:
         wrong.append("--error-control")
     if wrong:
         raise ValueError(f"{', '.join(wrong)} does not apply to --integrator {args.integrator}")
-    if cls is not DP5:
+    if not adaptive:
         return cls(**{k: v for k, v in given.items() if v is not None})
     goal = {"relaxed": {}, "windowed": {"window_lag": WINDOW_LAG},
             "exact": {"relaxed_lag": None, "window_lag": None}}[args.error_control]
+
+    def default(kind):  # the kind's ensemble default, or the named method at that kind's tolerances
+        if cls is None:
+            return ensemble_integrator(kind)
+        return cls.relaxed() if kind == "decorated" else cls.relaxed(SMOOTH_RTOL, SMOOTH_ATOL)
+
     if args.rtol is None and args.atol is None:  # each chain kind's default tolerances
-        return {c: dataclasses.replace(ensemble_integrator(c), **goal) for c in chains}
-    base = dataclasses.asdict(ensemble_integrator())
-    return DP5(**{**base, **{k: v for k, v in given.items() if v is not None}, **goal})
+        return {c: dataclasses.replace(default(c), **goal) for c in chains}
+    cls = cls or DP5  # --rtol/--atol alone set DP5's, as run_ensemble(rtol=..., atol=...) does
+    return dataclasses.replace(cls.relaxed(), **{k: v for k, v in given.items() if v is not None}, **goal)
 
 
 def _store_scale(path, scale) -> None:
