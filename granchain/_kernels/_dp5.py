@@ -401,11 +401,13 @@ def rk_integrate(method, m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_la
     scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
                borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
     if method == METHOD_RKN4:
-        status = _rkn4_loop(bm, bc, n, pw, bobs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
-                            exit_margin, max_steps, peak_rtol, bt, bx, bv, bpv, bpt, bgv, bpf, bpft, bgf, binfo, scratch)
+        status = _rkn4_loop(bm, bc, n, pw, bobs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
+                            t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, bt, bx, bv, bpv, bpt, bgv, bpf,
+                            bpft, bgf, binfo, scratch)
     else:
-        status = _dp5_loop(bm, bc, n, pw, bobs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag, t_max, stop_at_exit,
-                           exit_margin, max_steps, peak_rtol, bt, bx, bv, bpv, bpt, bgv, bpf, bpft, bgf, binfo, scratch)
+        status = _dp5_loop(bm, bc, n, pw, bobs, rtol, atol, h_init, h_fixed, relax_lag, relax_factor, window_lag,
+                           t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, bt, bx, bv, bpv, bpt, bgv, bpf,
+                           bpft, bgf, binfo, scratch)
     keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen)
     x[:] = xp[:M]
     v[:] = vp[:M]
@@ -504,14 +506,15 @@ def _rk_loop(method, m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_lag, r
                 last = True
             hw = hi - lo
             hp = padded_width(hw)
-            # Stages 2..7 (stage 7 is the new solution, reused as stage 1 next step).
+            # The stages (DP5: 2..7, RKN4: 1..3; the last is the new solution's, reused as the first
+            # next step).
             if method == METHOD_RKN4:
                 _rkn.stages(X, V, Kv, XS, VS, h, hp, C, IM, n, pw, F)
                 n_eval += 3
             else:
                 _stages(X, V, Kx, Kv, XS, VS, h, hp, C, IM, n, pw, F)
                 n_eval += 6
-            # xs, vs now hold the 5th-order solution at t + h.
+            # xs, vs now hold the new solution at t + h (DP5: 5th order; RKN4: 4th order).
             accept = True
             err = 0.0
             if h_fixed <= 0.0:

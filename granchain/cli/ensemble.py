@@ -162,7 +162,8 @@ def build_integrator(args, chains):
     if args.error_control != "relaxed" and not adaptive:
         wrong.append("--error-control")
     if wrong:
-        raise ValueError(f"{', '.join(wrong)} does not apply to --integrator {args.integrator}")
+        named = args.integrator or "rkn4/dp5 (the default)"
+        raise ValueError(f"{', '.join(wrong)} does not apply to --integrator {named}")
     if not adaptive:
         return cls(**{k: v for k, v in given.items() if v is not None})
     goal = {"relaxed": {}, "windowed": {"window_lag": WINDOW_LAG},
