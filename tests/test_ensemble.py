@@ -489,7 +489,7 @@ sys.path.insert(0, {root!r})
 import granchain as gc
 assert gc.__file__.startswith({root!r}), gc.__file__
 ds = gc.run_ensemble(4, realizations=2, seed=1, chains="decorated", chunk_size=2, progress=False)
-r = gc.simulate(gc.random_decorated(4, seed=1, realization=0), gc.DP5.relaxed(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL),
+r = gc.simulate(gc.random_decorated(4, seed=1, realization=0), gc.ensemble_integrator("decorated"),
                 t_grid=ds["time"].values)
 print(json.dumps({{"ensemble": int(ds["n_steps"].values[0, 0]), "simulate": r.n_steps}}))
 """
@@ -498,7 +498,7 @@ print(json.dumps({{"ensemble": int(ds["n_steps"].values[0, 0]), "simulate": r.n_
 @pytest.mark.slow
 def test_kernel_cache_follows_edits_of_the_integrator(tmp_path):
     """``cache=True`` keys a kernel's cache on its own source file only. The ensemble kernel
-    (``_kernels/_ensemble.py``) inlines ``dp5_integrate`` (``_kernels/_dp5.py``): after an edit of
+    (``_kernels/_ensemble.py``) inlines ``rk_integrate`` (``_kernels/_dp5.py``): after an edit of
     the integrator alone, a stale cache would make ``run_ensemble`` integrate with the old code
     while ``simulate`` uses the new one. On a copy of the package: warm the cache, change the
     step-size controller's safety factor, and check that both still take the same steps."""

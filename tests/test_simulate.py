@@ -132,13 +132,42 @@ def test_conservation_on_random_decorated_chains(radii):
 
 
 # -- 3. agreement with DOP853 ------------------------------------------------------------
+def in_order(b) -> np.ndarray:
+    """Granules whose peak comes no later than the next observed granule's (the last one always).
+
+    A peak after the next granule's is a late hump of a granule the pulse has passed, raised above
+    the pulse's own by the rattling of light granules: a chaotic observable that not even the
+    reference resolves. On decorated chains of radii [0.01, 0.4, 0.01, 0.4] and [0.015625, 0.4,
+    0.015625, 0.4] (found by the slow sweep), granule 4 peaks after granule 5, and DOP853 at rtol
+    1e-10 and 1e-12 put that peak 3.7e-5 and 2.8e-5 apart (relative). (The ensembles' report counts
+    these out-of-order peaks.)"""
+    return np.r_[b.peak_time[:-1] <= b.peak_time[1:], True]
+
+
 def assert_same_peaks(a, b, rel=1e-6):
+    """Peaks of ``a`` within ``rel`` of the reference ``b``, at the granules whose peaks come in
+    order (:func:`in_order`; at least half of them and the first two)."""
     np.testing.assert_array_equal(a.granule, b.granule)
-    np.testing.assert_allclose(a.peak_velocity, b.peak_velocity, rtol=rel, atol=0)
+    ok = in_order(b)
+    assert ok[:2].all() and ok.sum() >= 0.5 * ok.size, f"too many out-of-order peaks: {b.peak_time}"
+    np.testing.assert_allclose(a.peak_velocity[ok], b.peak_velocity[ok], rtol=rel, atol=0)
     # relative to the time, absolute near t = 0 (granule 1 peaks at t = 0)
     dt = np.abs(a.peak_time - b.peak_time)
-    bad = dt > rel * np.maximum(np.abs(b.peak_time), 1.0)
+    bad = ok & (dt > rel * np.maximum(np.abs(b.peak_time), 1.0))
     assert not bad.any(), f"peak times differ at granules {a.granule[bad]}: {a.peak_time[bad]} vs {b.peak_time[bad]}"
+
+
+def test_out_of_order_peaks_are_not_resolved_by_the_reference():
+    """Why :func:`assert_same_peaks` skips out-of-order peaks: on the sweep's failing chain the
+    reference itself moves that peak by more than the contract between rtol 1e-10 and 1e-12, while
+    the in-order peaks agree to 1e-8."""
+    chain = gc.decorated([0.01, 0.4, 0.01, 0.4])
+    b = gc.simulate(chain, gc.DOP853(rtol=1e-10, atol=1e-12))
+    c = gc.simulate(chain, gc.DOP853(rtol=1e-12, atol=1e-14))
+    ok = in_order(b)
+    assert not ok.all()
+    rel = np.abs(b.peak_velocity / c.peak_velocity - 1.0)
+    assert rel[~ok].max() > 1e-6 and rel[ok].max() < 1e-8, rel
 
 
 def _compare_with_reference(chain, reference):
