@@ -36,7 +36,7 @@ __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_
 #: Per-realisation peaks then stay within 1e-6 (relative; times within 1e-5) of DOP853 at rtol 1e-10
 #: (tests/test_window.py), far below the ensemble's statistical error (~1e-3 for 30,000
 #: realisations). Why two: in a decorated chain the light granules' oscillations set the step; RKN4
-#: takes ~0.8x DP5's steps there at half the force evaluations each (1.3-1.5x less time per N = 26
+#: takes ~0.9x DP5's steps there at half the force evaluations each (1.3-1.5x less time per N = 26
 #: realisation), with peaks as accurate as DP5's at rtol 1e-6 (at the free end of N = 6 chains more:
 #: in the 5 realisations of the paper's set checked where DP5 missed DOP853 by 1.2e-6 to 1.9e-6, within 6e-8).
 #: A chain without light granules takes long steps, its error accumulates along the chain and it needs

@@ -197,7 +197,7 @@ class _Compiled(Integrator):
 
 @dataclass(frozen=True)
 class DP5(_Compiled):
-    """Compiled adaptive Dormand-Prince 5(4), PI step control, max-norm error (the default).
+    """Compiled adaptive Dormand-Prince 5(4), PI step control, max-norm error (simulate's default).
 
     The defaults keep peak velocities and times within ~1e-7 (relative) of DOP853 at rtol 1e-10
     on random decorated chains and their effective chains. Goal-oriented error control (issue 9)
@@ -328,7 +328,7 @@ class RKN4(DP5):
     output by the quintic Hermite interpolant of the positions (``granchain._kernels._rkn``). A
     decorated chain's step is set by its light granules' oscillations; there this pair neither
     grows nor damps an oscillation up to h omega = 3.77 (DP5 grows beyond h omega ~ 1), and on
-    random N = 26 decorated chains it takes ~0.8x DP5's steps at half the force evaluations each.
+    random N = 26 decorated chains it takes ~0.9x DP5's steps at half the force evaluations each.
     Its tolerances are not DP5's: at rtol 1e-5 its peaks are as accurate as DP5's at 1e-6 (and more
     so at the free end of short chains), so :meth:`relaxed` and :meth:`windowed` take that default
     (the decorated ensembles' :func:`granchain.ensemble_integrator`; tests/test_window.py). For
