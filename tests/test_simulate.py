@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as hs
 
 import granchain as gc
+from conftest import in_order
 from granchain import bca
 
 # Small radii of decorated chains: the paper's range [0.01, 0.4], N = 2..26 large granules.
@@ -132,18 +133,6 @@ def test_conservation_on_random_decorated_chains(radii):
 
 
 # -- 3. agreement with DOP853 ------------------------------------------------------------
-def in_order(b) -> np.ndarray:
-    """Granules whose peak comes no later than the next observed granule's (the last one always).
-
-    A peak after the next granule's is a late hump of a granule the pulse has passed, raised above
-    the pulse's own by the rattling of light granules: a chaotic observable that not even the
-    reference resolves. On decorated chains of radii [0.01, 0.4, 0.01, 0.4] and [0.015625, 0.4,
-    0.015625, 0.4] (found by the slow sweep), granule 4 peaks after granule 5, and DOP853 at rtol
-    1e-10 and 1e-12 put that peak 3.7e-5 and 2.8e-5 apart (relative). (The ensembles' report counts
-    these out-of-order peaks.)"""
-    return np.r_[b.peak_time[:-1] <= b.peak_time[1:], True]
-
-
 def assert_same_peaks(a, b, rel=1e-6):
     """Peaks of ``a`` within ``rel`` of the reference ``b``, at the granules whose peaks come in
     order (:func:`in_order`; at least half of them and the first two)."""
