@@ -42,13 +42,9 @@ __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_
 #: A chain without light granules takes long steps, its error accumulates along the chain and it needs
 #: a tight tolerance (DP5 at rtol 1e-6 puts its peaks up to ~5e-6 off); there a 4th-order method
 #: gains nothing.
-ENSEMBLE_RTOL = 1e-5
-ENSEMBLE_ATOL = 1e-8
+ENSEMBLE_RTOL, ENSEMBLE_ATOL = RKN4.goal_tolerances  # 1e-5, 1e-8
 SMOOTH_RTOL = 5e-8
 SMOOTH_ATOL = 5e-11
-#: The tolerances of ``run_ensemble(rtol=..., atol=...)``'s DP5 when only one of them is given.
-DP5_RTOL = 1e-6
-DP5_ATOL = 1e-9
 
 
 def ensemble_integrator(chain: str = "decorated") -> Integrator:
@@ -335,7 +331,7 @@ def _integrator_of(integrator, rtol, atol) -> Integrator | None:
     if integrator is None:
         if rtol is None and atol is None:
             return None  # each chain kind's default (ensemble_integrator)
-        return DP5.relaxed(DP5_RTOL if rtol is None else rtol, DP5_ATOL if atol is None else atol)
+        return DP5.relaxed(rtol, atol)  # the one not given: DP5's goal tolerance (1e-6 or 1e-9)
     if rtol is not None or atol is not None:
         raise ValueError("rtol/atol set the default DP5; with integrator= set them on the integrator, e.g. DP5(rtol=1e-7)")
     return get_integrator(integrator)

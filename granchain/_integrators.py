@@ -269,6 +269,8 @@ class DP5(_Compiled):
     name: ClassVar[str] = "dp5"
     order: ClassVar[int] = 5
     kernel_id: ClassVar[int] = KERNEL_DP5
+    #: The tolerances of :meth:`relaxed` and :meth:`windowed` (validated, tests/test_window.py).
+    goal_tolerances: ClassVar[tuple] = (1e-6, 1e-9)
 
     def __post_init__(self):
         rtol, atol = _tolerances(self.rtol, self.atol)
@@ -294,18 +296,25 @@ class DP5(_Compiled):
         return self.relaxed_lag is None and self.window_lag is None
 
     @classmethod
-    def relaxed(cls, rtol: float = 1e-6, atol: float = 1e-9) -> "DP5":
-        """DP5 with the validated relaxed zone (the ensembles' default): granules more than 4
-        observed granules behind the front at 1000 times looser tolerances; every granule
-        integrated to the end (``RELAXED_LAG``, ``RELAXED_FACTOR`` in ``granchain._integrators``)."""
-        return cls(rtol, atol, relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)
+    def relaxed(cls, rtol: float | None = None, atol: float | None = None) -> "DP5":
+        """The method with the validated relaxed zone: granules more than 4 observed granules behind
+        the front at 1000 times looser tolerances; every granule integrated to the end
+        (``RELAXED_LAG``, ``RELAXED_FACTOR`` in ``granchain._integrators``). ``rtol``, ``atol`` default
+        to the method's validated ``goal_tolerances`` (DP5: 1e-6, 1e-9; RKN4: 1e-5, 1e-8)."""
+        return cls(*cls._goal_tolerances(rtol, atol), relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)
 
     @classmethod
-    def windowed(cls, rtol: float = 1e-6, atol: float = 1e-9) -> "DP5":
+    def windowed(cls, rtol: float | None = None, atol: float | None = None) -> "DP5":
         """:meth:`relaxed` plus the trailing window 7 observed granules behind the front
         (``WINDOW_LAG``): cost linear in N, peaks as accurate, the averaged pulse's tail not (see
         the class notes)."""
-        return cls(rtol, atol, relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR, window_lag=WINDOW_LAG)
+        return cls(*cls._goal_tolerances(rtol, atol), relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR,
+                   window_lag=WINDOW_LAG)
+
+    @classmethod
+    def _goal_tolerances(cls, rtol, atol) -> tuple:
+        default_rtol, default_atol = cls.goal_tolerances
+        return (default_rtol if rtol is None else rtol, default_atol if atol is None else atol)
 
     def describe(self) -> dict:
         record = super().describe()
@@ -339,17 +348,9 @@ class RKN4(DP5):
     order: ClassVar[int] = 4
     kernel_id: ClassVar[int] = KERNEL_RKN4
 
-    @classmethod
-    def relaxed(cls, rtol: float = 1e-5, atol: float = 1e-8) -> "RKN4":
-        """RKN4 with DP5's validated relaxed zone (:meth:`DP5.relaxed`), at the tolerances of the
-        decorated ensembles (``granchain.ENSEMBLE_RTOL``, ``ENSEMBLE_ATOL``): peaks as accurate as
-        ``DP5.relaxed()``'s (rtol 1e-6) on random decorated chains."""
-        return cls(rtol, atol, relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)
-
-    @classmethod
-    def windowed(cls, rtol: float = 1e-5, atol: float = 1e-8) -> "RKN4":
-        """:meth:`relaxed` plus DP5's trailing window (:meth:`DP5.windowed`, same limitation)."""
-        return cls(rtol, atol, relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR, window_lag=WINDOW_LAG)
+    #: The tolerances of :meth:`relaxed` and :meth:`windowed` (those of the decorated ensembles,
+    #: ``granchain.ENSEMBLE_RTOL``, ``ENSEMBLE_ATOL``): peaks as accurate as ``DP5.relaxed()``'s.
+    goal_tolerances: ClassVar[tuple] = (1e-5, 1e-8)
 
     def describe(self) -> dict:
         return Integrator.describe(self)  # every setting (DP5 drops the goal ones for its old records)

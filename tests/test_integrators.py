@@ -135,22 +135,30 @@ def test_dp5_error_follows_rtol():
 
 
 # -- DP5 kernel pieces ---------------------------------------------------------------------------
+def _error_norm_case(method, seed, hi=50):
+    """Random state and stages of ``hi`` granules: (hi, Kx, Kv, ratio, norm), ``norm()`` the error
+    norm of ``method`` on the arrays as they are when called (its ratios left in ``ratio``)."""
+    from granchain._kernels._dp5 import _error_norm
+
+    rng = np.random.default_rng(seed)
+    x, v, xs, vs = (rng.random(hi) for _ in range(4))
+    Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
+    ratio = np.zeros(2 * hi)
+    return hi, Kx, Kv, ratio, lambda: _error_norm(method, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
+
+
 @pytest.mark.parametrize("where", [0, 1, 5, 40, 99])
 def test_dp5_error_norm_keeps_a_nan(where):
     """A NaN ratio anywhere makes the error norm infinite (the step is refused as non-finite), also when
     finite ratios follow it (the max loop once let a later finite ratio overwrite the NaN); with all
     ratios finite the norm is their maximum, wherever it is."""
-    from granchain._kernels._dp5 import METHOD_DP5, _error_norm
+    from granchain._kernels._dp5 import METHOD_DP5
 
-    hi = 50
-    rng = np.random.default_rng(where)
-    x, v, xs, vs = (rng.random(hi) for _ in range(4))
-    Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
-    ratio = np.zeros(2 * hi)
-    err = _error_norm(METHOD_DP5, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
+    hi, Kx, Kv, ratio, norm = _error_norm_case(METHOD_DP5, where)
+    err = norm()
     assert err == ratio.max() and math.isfinite(err)
     (Kx if where < hi else Kv)[3, where % hi] = np.nan
-    assert _error_norm(METHOD_DP5, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == math.inf
+    assert norm() == math.inf
     assert np.isnan(ratio[where]) and np.isfinite(np.delete(ratio, where)).all()
 
 
@@ -158,20 +166,16 @@ def test_dp5_error_norm_keeps_a_nan(where):
 def test_rkn4_error_norm_keeps_a_nan(where):
     """The same for RKN4's error estimate, which reads the stage accelerations Kv[0..3] only: a NaN
     there makes both the position and the velocity ratio of that granule NaN and the norm infinite."""
-    from granchain._kernels._dp5 import METHOD_RKN4, _error_norm
+    from granchain._kernels._dp5 import METHOD_RKN4
 
-    hi = 50
-    rng = np.random.default_rng(where)
-    x, v, xs, vs = (rng.random(hi) for _ in range(4))
-    Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
-    ratio = np.zeros(2 * hi)
-    err = _error_norm(METHOD_RKN4, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
+    hi, Kx, Kv, ratio, norm = _error_norm_case(METHOD_RKN4, where)
+    err = norm()
     assert err == ratio.max() and math.isfinite(err)
     Kx[:, where] = np.nan  # not read by RKN4
     Kv[4:, where] = np.nan
-    assert _error_norm(METHOD_RKN4, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == err
+    assert norm() == err
     Kv[3, where] = np.nan
-    assert _error_norm(METHOD_RKN4, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio) == math.inf
+    assert norm() == math.inf
     assert np.isnan(ratio[where]) and np.isnan(ratio[hi + where])
 
 
