@@ -48,7 +48,7 @@ SMOOTH_ATOL = 5e-11
 
 
 def ensemble_integrator(chain: str = "decorated") -> Integrator:
-    """The ensembles' default integrator for a chain kind: :meth:`RKN4.relaxed` at
+    """The ensembles' default integrator for a chain kind: ``RKN4.relaxed()`` at
     :data:`ENSEMBLE_RTOL`, :data:`ENSEMBLE_ATOL` for "decorated" chains, :meth:`DP5.relaxed` at
     :data:`SMOOTH_RTOL`, :data:`SMOOTH_ATOL` for every other kind (their accuracy contract is in
     ``DP5``)."""

@@ -339,7 +339,8 @@ class RKN4(DP5):
     grows nor damps an oscillation up to h omega = 3.77 (DP5 grows beyond h omega ~ 1), and on
     random N = 26 decorated chains it takes ~0.9x DP5's steps at half the force evaluations each.
     Its tolerances are not DP5's: at rtol 1e-5 its peaks are as accurate as DP5's at 1e-6 (and more
-    so at the free end of short chains), so :meth:`relaxed` and :meth:`windowed` take that default
+    so at the free end of short chains), so ``RKN4.relaxed()`` and ``RKN4.windowed()`` (inherited:
+    :meth:`DP5.relaxed`, :meth:`DP5.windowed`) take that default
     (the decorated ensembles' :func:`granchain.ensemble_integrator`; tests/test_window.py). For
     smooth chains (no light granules) it saves nothing over DP5 at equal accuracy.
     """
@@ -348,7 +349,7 @@ class RKN4(DP5):
     order: ClassVar[int] = 4
     kernel_id: ClassVar[int] = KERNEL_RKN4
 
-    #: The tolerances of :meth:`relaxed` and :meth:`windowed` (those of the decorated ensembles,
+    #: The tolerances of ``RKN4.relaxed()`` and ``RKN4.windowed()`` (those of the decorated ensembles,
     #: ``granchain.ENSEMBLE_RTOL``, ``ENSEMBLE_ATOL``): peaks as accurate as ``DP5.relaxed()``'s.
     goal_tolerances: ClassVar[tuple] = (1e-5, 1e-8)
 
