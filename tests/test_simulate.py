@@ -327,6 +327,19 @@ def test_grid_beyond_exit_keeps_integrating():
     np.testing.assert_allclose(r.velocity[:, -1], r.velocities, rtol=0, atol=1e-12)  # free flight
 
 
+
+@pytest.mark.parametrize("integrator", [gc.DP5(), gc.RKN4.relaxed()])
+def test_a_strided_time_grid_is_taken(integrator):
+    """A grid that is a view with a stride (``t[::10]``) gives the result of its contiguous copy (the
+    kernels take C-contiguous arrays; in 0.4.0 such a grid stopped simulate with a Numba typing error)."""
+    fine = np.linspace(0.0, 20.0, 201)
+    chain = gc.decorated([0.2, 0.05, 0.3])
+    strided = gc.simulate(chain, integrator, t_grid=fine[::10])
+    copied = gc.simulate(chain, integrator, t_grid=fine[::10].copy())
+    assert strided.ok
+    np.testing.assert_array_equal(strided.velocity, copied.velocity)
+    np.testing.assert_array_equal(strided.t_grid, fine[::10])
+
 # -- windowing, determinism, bookkeeping ----------------------------------------------
 def test_granules_ahead_of_the_pulse_do_not_matter():
     """Integrating only the active window is exact: a longer chain gives bit-identical results
