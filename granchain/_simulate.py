@@ -173,7 +173,8 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         raise ValueError(f"stop must be 'exit' or 't_max', got {stop!r}")
     t_max = default_t_max(chain) if t_max is None else finite_scalar("t_max", t_max, positive=True)
     controls = RunControls(exit_margin, max_steps, peak_rtol)
-    grid = np.zeros(0) if t_grid is None else np.ascontiguousarray(t_grid, dtype=float).reshape(-1)  # the kernels take C-contiguous arrays
+    # a C-contiguous copy of a strided grid: the kernels take C-contiguous arrays
+    grid = np.zeros(0) if t_grid is None else np.ascontiguousarray(t_grid, dtype=float).reshape(-1)
     if grid.size:
         if not np.all(np.isfinite(grid)) or grid[0] < 0 or np.any(np.diff(grid) <= 0):
             raise ValueError("t_grid must be finite, >= 0 and strictly increasing")

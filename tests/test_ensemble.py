@@ -97,7 +97,6 @@ def test_chunking_and_threads_do_not_change_results(local, chunk_size, threads):
     assert_identical(ds, local)
 
 
-
 def test_a_strided_time_grid_is_taken(local):
     """run_ensemble takes a grid that is a strided view (``t[::2]``) as its contiguous copy."""
     grid = local["time"].values
@@ -106,6 +105,7 @@ def test_a_strided_time_grid_is_taken(local):
     np.testing.assert_array_equal(ds["mean_velocity"].values,
                                   gc.run_ensemble(N, realizations=4, seed=SEED, t_grid=grid[::2].copy(),
                                                   progress=False)["mean_velocity"].values)
+
 
 def test_run_ensemble_threads_leaves_the_default_alone():
     """``threads=None`` means "all cores" (docstring): an earlier ``threads=1`` call must not stick."""

@@ -327,7 +327,6 @@ def test_grid_beyond_exit_keeps_integrating():
     np.testing.assert_allclose(r.velocity[:, -1], r.velocities, rtol=0, atol=1e-12)  # free flight
 
 
-
 @pytest.mark.parametrize("integrator", [gc.DP5(), gc.RKN4.relaxed()])
 def test_a_strided_time_grid_is_taken(integrator):
     """A grid that is a view with a stride (``t[::10]``) gives the result of its contiguous copy (the
@@ -339,6 +338,7 @@ def test_a_strided_time_grid_is_taken(integrator):
     assert strided.ok
     np.testing.assert_array_equal(strided.velocity, copied.velocity)
     np.testing.assert_array_equal(strided.t_grid, fine[::10])
+
 
 # -- windowing, determinism, bookkeeping ----------------------------------------------
 def test_granules_ahead_of_the_pulse_do_not_matter():
