@@ -11,13 +11,14 @@ relaxed zone (behind the pulse, where it rattles):
 - after each accepted macro step [t, t + H], the granule is integrated alone by RKN4(3) micro-steps
   with their own step control (relaxed tolerances), its two neighbours' positions read from the
   quintic Hermite interpolant of the macro step (positions, velocities, accelerations at both ends);
-- the contact forces it exerted on its neighbours over the step are added to them exactly as an
-  external forcing: v += J / M and x += (integral of J) / M, J the impulse so far (the micro-steps'
+- the contact forces it exerted on its neighbours over the step are added to them as an external
+  forcing: v += J / M and x += (integral of J) / M, J the impulse so far (the micro-steps'
   velocity and position weights integrate it), and their accelerations at t + H recomputed.
 
 The coupling is explicit (the neighbours' trajectories inside a macro step do not see the fast
-granule's pushes of that step): its error is of the order of the pushes' momentum, m_fast / M ~ 1e-6
-of a large granule's, per macro step, inside the relaxed zone only (granules the pulse has left).
+granule's pushes of that step): its error is of the order of the pushes' momentum, a fraction
+m_fast / M = r^3 of a large granule's (2e-6 at r = 0.012, 1e-3 at 0.1) per macro step, inside the
+relaxed zone only (granules the pulse has left).
 """
 
 from __future__ import annotations
