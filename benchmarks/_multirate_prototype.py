@@ -23,40 +23,33 @@ relaxed zone only (granules the pulse has left).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
 from granchain._kernels import _rkn
+from granchain._kernels._common import POW_HERTZ, acceleration_of, accelerations, contact_force
+from granchain._kernels._dp5 import ALPHA_RKN4 as ALPHA
+from granchain._kernels._dp5 import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY
 
-BETA = 0.08
-ALPHA = 0.25 - 0.75 * BETA
-
-
-@njit(cache=True)
-def _force(d, c):
-    return c * d * math.sqrt(d) if d > 0.0 else 0.0  # Eq. (motion_rescaled), n = 5/2
+N = 2.5  # Hertz contacts, Eq. (motion_rescaled)
 
 
 @njit(cache=True)
-def _accelerations(x, c, inv_m, a):
-    M = x.shape[0]
-    left = 0.0
-    for i in range(M):
-        right = _force(x[i] - x[i + 1], c[i]) if i < M - 1 else 0.0
-        a[i] = (left - right) * inv_m[i]
-        left = right
+def _accepted_factor(err, err_old):
+    """Step factor after an accepted step: the step loop's PI controller (``_dp5``) with RKN4's exponent."""
+    return min(MAX_FACTOR, max(MIN_FACTOR, SAFETY * err ** -ALPHA * err_old ** BETA)) if err > 0.0 else MAX_FACTOR
+
+
+@njit(cache=True)
+def _rejected_factor(err):
+    return min(1.0, max(MIN_FACTOR, SAFETY * err ** -ALPHA))
 
 
 @njit(cache=True)
 def _local_accelerations(x, c, inv_m, a, lo, hi):
     """a[lo..hi-1] (their contacts only)."""
-    M = x.shape[0]
-    for i in range(max(lo, 0), min(hi, M)):
-        left = _force(x[i - 1] - x[i], c[i - 1]) if i > 0 else 0.0
-        right = _force(x[i] - x[i + 1], c[i]) if i < M - 1 else 0.0
-        a[i] = (left - right) * inv_m[i]
+    for k in range(max(lo, 0), min(hi, x.shape[0])):
+        a[k] = acceleration_of(x, k, c, inv_m, N, POW_HERTZ)
 
 
 @njit(cache=True)
@@ -80,7 +73,7 @@ def _poly(q, th):
 @njit(cache=True)
 def _fast_forces(y, th, ql, qr, cl, cr):
     """(force of the left contact on the fast granule, force of the right contact on the right neighbour)."""
-    return _force(_poly(ql, th) - y, cl), _force(y - _poly(qr, th), cr)
+    return contact_force(_poly(ql, th) - y, cl, N, POW_HERTZ), contact_force(y - _poly(qr, th), cr, N, POW_HERTZ)
 
 
 @njit(cache=True)
@@ -130,12 +123,12 @@ def _micro(y, w, H, ql, qr, cl, cr, inv_mj, rtol, atol, hstart, out):
             Jr += jr
             y, w, f0, fl, fr = y3, w3, f3, gl3, gr3
             tau += h
-            factor = 0.9 * err ** -ALPHA * err_old ** BETA if err > 0.0 else 10.0
+            factor = _accepted_factor(err, err_old)
             err_old = max(err, 1e-4)
-            if h == proposed or factor < 1.0:
-                proposed = h * min(10.0, max(0.2, factor))
+            if h == proposed or factor < 1.0:  # a step cut short at H keeps the proposal
+                proposed = h * factor
         else:
-            proposed = h * min(1.0, max(0.2, 0.9 * err ** -ALPHA))
+            proposed = h * _rejected_factor(err)
     out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7] = y, w, Jl, IJl, Jr, IJr, steps, proposed
 
 
@@ -152,6 +145,7 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
     im = inv_m.copy()
     fast = np.zeros(M, np.bool_)
     hmicro = np.full(M, 1e-3)
+    F = np.zeros(M + 1)  # contact forces (scratch of _common.accelerations)
     a = np.zeros(M)
     f1 = np.zeros(M)
     f2 = np.zeros(M)
@@ -165,7 +159,7 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
     push_v = np.zeros(M)
     vprev = np.zeros(n_obs)
     peaked = np.zeros(n_obs, np.bool_)
-    _accelerations(x, cm, im, a)
+    accelerations(x, cm, im, N, POW_HERTZ, M, F, a)
     front = -1
     relaxed = 0
     for q in range(n_obs):
@@ -185,13 +179,13 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
         h2 = h * h
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C1 * v[i]) + h2 * (_rkn.A10 * a[i])
-        _accelerations(xs, cm, im, f1)
+        accelerations(xs, cm, im, N, POW_HERTZ, M, F, f1)
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C2 * v[i]) + h2 * (_rkn.A20 * a[i] + _rkn.A21 * f1[i])
-        _accelerations(xs, cm, im, f2)
+        accelerations(xs, cm, im, N, POW_HERTZ, M, F, f2)
         for i in range(M):
             xs[i] = x[i] + h * v[i] + h2 * (_rkn.B0 * a[i] + _rkn.B1 * f1[i] + _rkn.B2 * f2[i])
-        _accelerations(xs, cm, im, f3)
+        accelerations(xs, cm, im, N, POW_HERTZ, M, F, f3)
         err = 0.0
         for i in range(M):
             vs[i] = v[i] + h * (_rkn.P0 * a[i] + _rkn.P1 * f1[i] + _rkn.P2 * f2[i] + _rkn.P3 * f3[i])
@@ -202,7 +196,7 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
                       abs(ev) / ((atol + rtol * max(abs(v[i]), abs(vs[i]))) * w))
         if not err <= 1.0:
             rejected += 1
-            h *= min(1.0, max(0.2, 0.9 * err ** -ALPHA))
+            h *= _rejected_factor(err)
             continue
         steps += 1
         # the fast granules over [t, t + h] (all on the macro step's trajectories of their
@@ -257,8 +251,7 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
                         cm[j - 1] = 0.0
                         cm[j] = 0.0
                         _local_accelerations(x, cm, im, a, j - 2, j + 3)
-        factor_h = 0.9 * err ** -ALPHA * err_old ** BETA if err > 0.0 else 10.0
+        h *= _accepted_factor(err, err_old)
         err_old = max(err, 1e-4)
-        h *= min(10.0, max(0.2, factor_h))
     counts[0], counts[1], counts[2] = steps, rejected, micro
     counts[3] = int(fast.sum())
