@@ -115,7 +115,7 @@ class EnsembleSpec:
             per_chain = {c: (get_integrator(given) if given is not None else ensemble_integrator(c)) for c in self.chains}
         set_("integrator", per_chain[self.chains[0]])
         set_("chain_integrators", per_chain)
-        grid = self.family.default_time_grid() if self.t_grid is None else np.ascontiguousarray(self.t_grid, dtype=float).reshape(-1)
+        grid = self.family.default_time_grid() if self.t_grid is None else np.asarray(self.t_grid, dtype=float).reshape(-1)
         if grid.size == 0 or not np.all(np.isfinite(grid)) or grid[0] < 0 or np.any(np.diff(grid) <= 0):
             raise ValueError("t_grid must be a non-empty, finite, increasing array of times >= 0")
         grid = np.array(grid)
