@@ -84,4 +84,4 @@ __all__ = [
     "tapered",
     "to_physical",
 ]
-from . import dephasing, validity  # noqa: E402  (issue 13: validity maps, the averaged-pulse decay)
+from . import dephasing, validity  # noqa: E402  (validity maps, the averaged-pulse decay)

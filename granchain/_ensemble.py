@@ -30,7 +30,7 @@ from .families import ChainFamily, RandomDecorated
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
 
-#: Ensemble defaults (issue 9): the relaxed zone behind the pulse (:meth:`DP5.relaxed`), with the
+#: Ensemble defaults: the relaxed zone behind the pulse (:meth:`DP5.relaxed`), with the
 #: Runge-Kutta-Nystrom pair :class:`RKN4` at ENSEMBLE_RTOL / ENSEMBLE_ATOL for decorated chains and DP5
 #: at SMOOTH_RTOL / SMOOTH_ATOL for every other chain kind (effective, polydisperse, ...).
 #: Per-realisation peaks then stay within 1e-6 (relative; times within 1e-5) of DOP853 at rtol 1e-10
@@ -134,7 +134,7 @@ class EnsembleSpec:
 
     def _other_integrators(self) -> dict:
         """``{"chain_integrators": {kind: record}}`` when the chain kinds are not all integrated by
-        ``integrator`` (the default since issue 9), else nothing (the record of earlier stores)."""
+        ``integrator`` (the default since granchain 0.3), else nothing (the record of earlier stores)."""
         records = {c: integ.describe() for c, integ in self.chain_integrators.items()}
         if all(r == self.integrator.describe() for r in records.values()):
             return {}

@@ -200,7 +200,7 @@ class DP5(_Compiled):
     """Compiled adaptive Dormand-Prince 5(4), PI step control, max-norm error (simulate's default).
 
     The defaults keep peak velocities and times within ~1e-7 (relative) of DOP853 at rtol 1e-10
-    on random decorated chains and their effective chains. Goal-oriented error control (issue 9)
+    on random decorated chains and their effective chains. Goal-oriented error control
     is off by default: ``DP5()`` integrates every granule to the end at the full tolerance.
 
     Parameters
@@ -318,7 +318,7 @@ class DP5(_Compiled):
 
     def describe(self) -> dict:
         record = super().describe()
-        if self.is_exact and self.relaxed_factor == RELAXED_FACTOR:  # the record of stores written before issue 9
+        if self.is_exact and self.relaxed_factor == RELAXED_FACTOR:  # the record of stores written by granchain < 0.3
             for key in ("relaxed_lag", "relaxed_factor", "window_lag"):
                 record.pop(key)
         return record

@@ -2,7 +2,7 @@
 
 Realisation i uses ``SeedSequence(seed, spawn_key=(i,))``, the same stream
 ``SeedSequence(seed).spawn(i + 1)[i]`` gives: its radii never depend on how
-the work was chunked, threaded or distributed (DESIGN.md Sec. 5).
+the work was chunked, threaded or distributed.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Why the averaged pulse decays: dephasing of realisations (issue 13; the paper's open "remedy").
+"""Why the averaged pulse decays: dephasing of realisations (the paper's open "remedy").
 
 The paper's Fig. 2 amplitude is the peak of the ensemble-averaged pulse, max_t <v_k(t)>. Each
 realisation's pulse reaches granule k at its own time t_k (spread s_k) with its own peak P_k;

@@ -1,4 +1,4 @@
-"""Where the cheap descriptions hold: validity maps of the effective chain and the BCA (issue 13).
+"""Where the cheap descriptions hold: validity maps of the effective chain and the BCA.
 
 The paper (Sec. III A, V) claims that the effective chain (Eqs. renorm-mass, effec-int, zetak)
 and the binary collision approximation (BCA, Sec. III B) describe the random decorated chain
@@ -236,7 +236,7 @@ def _attrs(kind: str, realizations: int, seed: int, blocks: int, integrator) -> 
     return {
         "title": f"granchain {kind}: effective chain and BCA vs the decorated chain",
         "source": f"granchain {__version__} granchain.validity (paired run_ensemble, chains decorated + effective)",
-        "references": "U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg, Pulse propagation in decorated random chains; granchain issue 13",
+        "references": "U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg, Pulse propagation in decorated random chains",
         "realizations": int(realizations),
         "seed": int(seed),
         "blocks": int(blocks),
@@ -324,7 +324,7 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
 
 # --------------------------------------------------------------------------- any distribution
 def default_distributions(lower: float = 0.01, upper: float = 0.4) -> dict:
-    """Small-radius distributions on the same support [lower, upper] (issue 13, part 2):
+    """Small-radius distributions on the same support [lower, upper]:
     uniform (the paper), a truncated normal, two betas (mass low, mass high), a bimodal mixture."""
     from scipy import stats
 
@@ -408,7 +408,7 @@ def report_section(validity=None, distributions=None, dephasing=None) -> str:
     """Markdown section "Where the theory holds" from a :func:`validity_map` Dataset, a
     :func:`compare_distributions` Dataset and a dephasing summary (``granchain.dephasing.summary``);
     any may be None."""
-    lines = ["## Where the theory holds (issue 13)", ""]
+    lines = ["## Where the theory holds", ""]
     if validity is not None:
         v = validity
         lines += [f"Paired decorated/effective ensembles, {v.attrs['realizations']} realisations per point, small radii "

@@ -9,13 +9,25 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 
 
-def test_every_tutorial_is_in_the_toctree_and_executed():
+def test_every_page_is_in_the_toctree():
+    """Tutorials, how-to guides and explanation pages are all reachable from the landing page."""
     index = (DOCS / "index.md").read_text()
+    for part in ("tutorials", "howto", "explanation"):
+        pages = sorted((DOCS / part).glob("*.md"))
+        assert pages, f"docs/{part} is empty"
+        for md in pages:
+            assert f"{part}/{md.stem}" in index, f"{part}/{md.name} is not in docs/index.md's toctree"
+
+
+def test_every_tutorial_is_executed():
     for md in sorted((DOCS / "tutorials").glob("*.md")):
-        assert f"tutorials/{md.stem}" in index, f"{md.name} is not in docs/index.md's toctree"
         head = md.read_text().split("---")[1]
         assert "file_format: mystnb" in head and "kernelspec" in head, f"{md.name} would not be executed"
-    assert "tutorials/families" in index  # a chain family of your own (issue 12 asks for it)
+
+
+def test_how_to_guides_cover_the_common_tasks():
+    stems = {md.stem for md in (DOCS / "howto").glob("*.md")}
+    assert {"resume", "dask", "export-netcdf", "units", "long-chains"} <= stems
 
 
 def test_build_script_is_executable_and_strict():

@@ -92,7 +92,7 @@ MAX_FACTOR = 10.0
 #: Bit masks of a float64 (``_error_norm``): all but the sign; the exponent of inf and NaN.
 SIGN_CLEAR = 0x7FFF_FFFF_FFFF_FFFF
 EXPONENT_ALL_ONES = 0x7FF0_0000_0000_0000
-#: The padded layout (issue 9, item 4): the loops over the window (stages, error norm, update) run
+#: The padded layout: the loops over the window (stages, error norm, update) run
 #: to the next multiple of LANES past its end. LLVM vectorises them LANES doubles wide (AVX-512) and
 #: finishes a loop whose length is not a multiple of that one element at a time, which cost a step
 #: as much as the vector part (the six stages: ~460 ns for a window of 31 granules, ~290 ns for 32).
@@ -356,7 +356,7 @@ def rk_integrate(method, m, c, n, pw, obs, rtol, atol, h_init, h_fixed, relax_la
     ends ``exit_margin`` after the pulse has left the last granule (and not
     before t_grid[-1]); otherwise at ``t_max``.
 
-    Goal-oriented error control (``granchain.DP5``, issue 9; both off when <= 0, and always off
+    Goal-oriented error control (``granchain.DP5``; both off when <= 0, and always off
     for a chain ending in a wall, whose pulse comes back). The *front* is the most advanced
     observed granule whose velocity maximum has been located; it never moves backwards.
     - ``relax_lag`` > 0: granules behind observed granule front - relax_lag enter the error norm

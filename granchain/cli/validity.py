@@ -1,4 +1,4 @@
-"""``granchain validity``: where the effective chain and the BCA hold (issue 13).
+"""``granchain validity``: where the effective chain and the BCA hold.
 
 Runs paired decorated/effective ensembles over a grid of small-radius ranges [alpha, beta]
 (uniform radii) and N, one resumable Zarr store per point under ``--out``/points, and writes the
@@ -31,7 +31,7 @@ def _ints(text: str) -> tuple:
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("validity", help="validity maps of the effective chain and the BCA (issue 13)", description=__doc__)
+    p = subparsers.add_parser("validity", help="validity maps of the effective chain and the BCA", description=__doc__)
     p.add_argument("--out", required=True, help="output directory (resumed if it exists)")
     p.add_argument("--quick", action="store_true", help="a coarse map in a couple of minutes")
     p.add_argument("--realizations", type=int, default=None, help="realisations per point (default 400; quick 100)")

@@ -1,6 +1,6 @@
 """Paper Fig. 2: decay of the pulse amplitude along the chain, N = 26.
 
-The amplitude is the peak of the ensemble-averaged pulse, max_t <v_k(t)> (DESIGN.md Sec. 2),
+The amplitude is the peak of the ensemble-averaged pulse, max_t <v_k(t)> (docs: the two amplitudes),
 fitted as the paper does, by unweighted least squares, with v_k = a exp(-b k^c) over
 k = 4..25 (k = 1 is the struck granule and k = N the free end); the inset fits the same
 peaks against their times, v = a' exp(-b' t^c'). Errors: jackknife over the store's chunks

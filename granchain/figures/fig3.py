@@ -1,8 +1,8 @@
 """Paper Fig. 3: arrival time of the pulse versus granule k, N = 26, with the linear fit
 t = slope k + intercept (paper: 2.402 k - 1.181) and the BCA slope S (Eq. slope).
 
-The arrival time is that of the ensemble-averaged pulse, argmax_t <v_k(t)> (DESIGN.md
-Sec. 2), fitted as the paper does by unweighted least squares over k = 2..25: this range
+The arrival time is that of the ensemble-averaged pulse, argmax_t <v_k(t)> (docs: the
+two amplitudes), fitted as the paper does by unweighted least squares over k = 2..25: this range
 reproduces the paper's intercept; k = 1 is the struck granule (its "arrival" is t = 0 by
 construction) and k = N the free end (a plateau, not a peak). Errors: jackknife over the
 store's chunks of realisations when ``sums`` are given (they measure sampling noise), else

@@ -1,4 +1,4 @@
-"""Validity maps (issue 13): heat maps over the small-radius range [alpha, beta] of how far the
+"""Validity maps: heat maps over the small-radius range [alpha, beta] of how far the
 effective chain and the BCA are from the decorated chain, with the 1 % and 5 % contours.
 
 ``compute(out, ...)`` runs (or resumes) :func:`granchain.validity.validity_map`; ``plot(ds)`` draws
