@@ -1,4 +1,4 @@
-"""A multirate prototype for issue 9, item 5 (used by bench_multirate.py; not part of granchain).
+"""A multirate prototype for the light granules behind the pulse (used by bench_multirate.py; not part of granchain).
 
 RKN4(3) with the relaxed zone of ``RKN4.relaxed()``, on a whole decorated chain, landing on the grid
 times and recording the observed granules' velocities there (no peaks, window or records: the

@@ -1,4 +1,4 @@
-"""Issue 9, item 5: does a multirate treatment of the light granules' neighbourhoods pay?
+"""Does a multirate treatment of the light granules' neighbourhoods pay?
 
 A multirate scheme integrates a fast granule (a light small granule, between its two large
 neighbours) with its own short steps, and the rest of the chain with the long steps the other
@@ -18,8 +18,8 @@ granules allow. Two measurements, both against the same chains as they are (the 
    with the single-rate relaxed run's as the yardstick.
 
 Samples: the paper's N = 26 set (seed 1000 * 2026 + 26): its first ``--late`` realisations whose
-lightest small granule (r < 0.013) sits in the last third of the chain (issue 9's
-"lightest-granule-late" case), and its first ``--random`` realisations. Integrators (part 1): the
+lightest small granule (r < 0.013) sits in the last third of the chain (the
+"lightest-granule-late" case, where the light granule's short steps cost longest), and its first ``--random`` realisations. Integrators (part 1): the
 decorated ensembles' default ``RKN4.relaxed()`` and ``RKN4.windowed()``.
 
     python benchmarks/bench_multirate.py            # a minute or two

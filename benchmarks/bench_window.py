@@ -1,13 +1,13 @@
-"""Goal-oriented error control (issue 9): CPU cost of the relaxed zone, the trailing window and RKN4.
+"""Goal-oriented error control: CPU cost of the relaxed zone, the trailing window and RKN4.
 
 Baselines, both measured in the same run:
 
 - ``exact``: the exact DP5 at the ensembles' tolerances (``DP5(1e-6, 1e-9)``, every granule
-  integrated to the end with the full tolerance: the ensemble default before issue 9), in this
+  integrated to the end with the full tolerance: the ensemble default of 0.2), in this
   version's kernel: the ratio to it is what the goal-oriented error control alone buys;
-- ``0.2 DP5``: the same integrator in granchain as it was when issue 9 was written ("today's DP5":
+- ``0.2 DP5``: the same integrator in granchain as it was in 0.2 ("the 0.2 DP5":
   commit ``BASELINE_COMMIT``, taken from this repository's history with ``git archive`` and timed in
-  a subprocess on the same realisations). The ratio to it adds what the kernel work of issue 9 item 4
+  a subprocess on the same realisations). The ratio to it adds what the step-loop kernel work
   bought (borrowed arrays in the step loop: no reference counting; see ``_kernels/_common.borrowed``).
   Skipped, with a note, where there is no git history.
 
@@ -68,7 +68,7 @@ PAPER_REALIZATIONS = 30_000
 TARGET_SPEEDUP = 2.5
 TARGET_SCALING = 4.5
 TARGET_PAPER = 300.0
-#: granchain before issue 9 (0.2.0 with issues 8, 10-13): the DP5 the issue measured.
+#: granchain 0.2 (before the goal-oriented error control and the step-loop kernel work): its DP5.
 BASELINE_COMMIT = "3dc0bcf"
 BASELINE_SCRIPT = """
 import importlib.util, json, os, sys
@@ -180,7 +180,7 @@ def measure(args, package):
         for name in GOAL:
             ratio = base / res[name][0]
             line = f"{ratio:.2f}x fewer CPU-seconds than this version's exact DP5"
-            if old:  # the issue's baseline: today's (0.2) DP5
+            if old:  # the baseline the speed target names: the 0.2 DP5
                 ratio = old / res[name][0]
                 line = f"{ratio:.2f}x fewer CPU-seconds than the 0.2 DP5 ({line})"
             verdicts.append(f"{'PASS' if ratio >= TARGET_SPEEDUP else 'MISS'}  {name}, {threads} thread(s): {line} "

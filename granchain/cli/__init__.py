@@ -12,7 +12,7 @@ import importlib
 import sys
 import warnings
 
-SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "validity", "info", "export")
+SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "validity", "info", "export", "theory")
 
 
 def build_parser() -> argparse.ArgumentParser:
