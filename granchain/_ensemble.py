@@ -106,9 +106,19 @@ class EnsembleSpec:
         set_("chains", tuple(c for c in known if c in chains))
         # One integrator for every chain kind when one is given; else each kind's default.
         if self.chain_integrators is not None:
-            if set(self.chain_integrators) != set(self.chains):
-                raise ValueError(f"chain_integrators must name one integrator for each of the chains {list(self.chains)}, "
-                                 f"got {sorted(self.chain_integrators)}")
+            # A dict may name kinds the family has but this run does not compute (one dict for runs of
+            # "decorated", "effective" or both); a kind the family does not have is a typo, and a kind
+            # the run computes needs its integrator.
+            if not isinstance(self.chain_integrators, dict):
+                raise ValueError(f"chain_integrators must be a dict {{chain kind: integrator}}, got {self.chain_integrators!r}")
+            unknown = sorted(set(self.chain_integrators) - set(known))
+            if unknown:
+                raise ValueError(f"the integrator dict names chain kinds {unknown} that the family {type(self.family).__name__} does not "
+                                 f"have; its kinds are {list(known)}")
+            missing = [c for c in self.chains if c not in self.chain_integrators]
+            if missing:
+                raise ValueError(f"the integrator dict has no integrator for the chain kinds {missing} this run computes "
+                                 f"(it names {sorted(self.chain_integrators)}); add them, or pass one integrator for all")
             per_chain = {c: get_integrator(self.chain_integrators[c]) for c in self.chains}
         else:
             given = self.integrator
@@ -362,7 +372,9 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         "decorated", "effective" or "both" for decorated families; the family's one chain otherwise.
     integrator : DP5 | Verlet | DOP853 | str, optional
         Any registered integrator, used for every chain kind, or a dict {chain kind: integrator}
-        naming one for each of ``chains``. Default: :func:`ensemble_integrator`
+        naming one for each of ``chains`` (it may also name other kinds of the family, which this
+        run does not use, so one dict serves runs of either chain; a kind the family does not have,
+        or a computed kind without an integrator, is refused). Default: :func:`ensemble_integrator`
         of each kind (``RKN4.relaxed`` at :data:`ENSEMBLE_RTOL` for decorated chains, ``DP5.relaxed``
         at :data:`SMOOTH_RTOL` for the others), or ``DP5.relaxed(rtol, atol)`` for all if
         ``rtol``/``atol`` are given (the other one then 1e-6 or 1e-9). ``granchain.DP5(1e-6, 1e-9)`` is the exact (untruncated) integration of earlier

@@ -42,10 +42,19 @@ WINDOW_LAG = 7
 
 
 def _tolerances(rtol, atol):
+    """Tolerances of an adaptive method: rtol in [1e-14, 1), atol in (0, 1). An error of 100 % (or of
+    one rescaled velocity unit, the struck granule's) is no error control at all: every step would be
+    accepted and the run would fail or return noise."""
     rtol = finite_scalar("rtol", rtol, positive=True)
     atol = finite_scalar("atol", atol, positive=True)
     if rtol < 1e-14:
         raise ValueError(f"rtol = {rtol:g} is below what double precision can deliver; use rtol >= 1e-14")
+    if rtol >= 1.0:
+        raise ValueError(f"rtol = {rtol:g} must lie in (0, 1): it is a relative error per step (the ensembles' "
+                         "defaults are 1e-6 for DP5 and 1e-5 for RKN4)")
+    if atol >= 1.0:
+        raise ValueError(f"atol = {atol:g} must lie in (0, 1): it is an absolute error in rescaled units, in which "
+                         "the struck granule's velocity is 1 (the ensembles' defaults are 1e-9 and 1e-8)")
     return rtol, atol
 
 
@@ -286,6 +295,9 @@ class DP5(_Compiled):
         if factor < 1.0:
             raise ValueError(f"relaxed_factor = {factor:g} would tighten the tolerance behind the pulse; use a factor >= 1")
         object.__setattr__(self, "relaxed_factor", factor)
+        if self.relaxed_lag is not None and self.rtol * factor >= 1.0:
+            raise ValueError(f"the relaxed zone's tolerance rtol * relaxed_factor = {self.rtol * factor:g} must stay below 1 "
+                             "(it would control nothing there): lower rtol or relaxed_factor")
         if self.relaxed_lag is not None and self.window_lag is not None and self.relaxed_lag >= self.window_lag:
             raise ValueError(f"relaxed_lag = {self.relaxed_lag} must be smaller than window_lag = {self.window_lag}: "
                              "the relaxed zone lies between the front and the trailing window")

@@ -11,6 +11,7 @@ from ._integrators import RunControls, get_integrator
 from ._kernels._common import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END, final_energy, total_momentum
 from ._status import Status
 from ._validate import finite_scalar
+from .units import rescaled_attrs
 
 __all__ = ["Status", "PulseResult", "simulate", "default_t_max"]
 
@@ -97,10 +98,10 @@ class PulseResult:
 
         ds = xr.Dataset(
             {
-                "peak_velocity": ("granule", self.peak_velocity, {"units": "V_1 (rescaled)", "long_name": "maximum velocity of the granule"}),
-                "peak_time": ("granule", self.peak_time, {"units": "rescaled time (paper Sec. II)", "long_name": "time of the maximum velocity"}),
+                "peak_velocity": ("granule", self.peak_velocity, {**rescaled_attrs("velocity"), "long_name": "maximum velocity of the granule"}),
+                "peak_time": ("granule", self.peak_time, {**rescaled_attrs("time"), "long_name": "time of the maximum velocity"}),
             },
-            coords={"granule": ("granule", self.granule, {"long_name": "granule index (1-based)"})},
+            coords={"granule": ("granule", self.granule, {"long_name": "granule index (1-based)", "units": "1"})},
             attrs={
                 "status": int(self.status), "status_message": self.message, "integrator": self.integrator,
                 "energy_error": self.energy_error, "momentum_error": self.momentum_error,
@@ -108,22 +109,20 @@ class PulseResult:
             },
         )
         if self.velocity is not None:
-            ds["velocity"] = (("granule", "time"), self.velocity, {"units": "V_1 (rescaled)", "long_name": "velocity"})
-            ds = ds.assign_coords(time=("time", self.t_grid, {"units": "rescaled time"}))
+            ds["velocity"] = (("granule", "time"), self.velocity, {**rescaled_attrs("velocity"), "long_name": "velocity"})
+            ds = ds.assign_coords(time=("time", self.t_grid, {**rescaled_attrs("time"), "long_name": "time"}))
         if self.peak_force is not None:
-            force_units = "M_1 L / T^2 (rescaled force, paper Eq. motion_rescaled)"
-            ds["peak_force"] = ("contact", self.peak_force, {"units": force_units, "long_name": "maximum contact force c delta^(n-1)"})
-            ds["peak_force_time"] = ("contact", self.peak_force_time, {"units": "rescaled time (paper Sec. II)",
+            ds["peak_force"] = ("contact", self.peak_force, {**rescaled_attrs("force"), "long_name": "maximum contact force c delta^(n-1)"})
+            ds["peak_force_time"] = ("contact", self.peak_force_time, {**rescaled_attrs("time"),
                                                                        "long_name": "time of the maximum contact force"})
             last = "; the last is the wall contact" if self.chain.wall else ""
             ds = ds.assign_coords(contact=("contact", np.arange(1, self.peak_force.size + 1),
-                                           {"long_name": f"contact j between granules j and j+1 (1-based){last}"}))
+                                           {"long_name": f"contact j between granules j and j+1 (1-based){last}", "units": "1"}))
         if self.chain.wall:
             ds.attrs.update(peak_wall_force=self.peak_wall_force, peak_wall_force_time=self.peak_wall_force_time,
                             wall_impulse=self.wall_impulse)
             if self.wall_force is not None:
-                ds["wall_force"] = ("time", self.wall_force, {"units": "M_1 L / T^2 (rescaled force, paper Eq. motion_rescaled)",
-                                                              "long_name": "force on the wall"})
+                ds["wall_force"] = ("time", self.wall_force, {**rescaled_attrs("force"), "long_name": "force on the wall"})
         return ds
 
 

@@ -26,14 +26,17 @@ import numpy as np
 
 from ._status import NOT_COMPUTED, Status, describe_codes
 from ._version import __version__
+from .units import RESCALED, rescaled_attrs
 
 __all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "MemorySink",
            "ZarrSink", "StoreRepairWarning", "stored_record", "check_same_parameters", "checked_variables", "result_variables",
            "per_realisation_variables"]
 
-UNITS_V = "V_1 (velocity of the struck granule; rescaled, paper Sec. II)"
-UNITS_T = "rescaled time (paper Sec. II)"
-UNITS_F = "M_1 L / T^2 (rescaled force, paper Eq. motion_rescaled; granchain.units converts to N)"
+#: Rescaled quantities are stored as dimensionless numbers (units "1": pint, pint-xarray and UDUNITS
+#: read them), with what they count in ``rescaled_quantity``/``units_description`` (granchain.units).
+UNITS_V = rescaled_attrs("velocity")
+UNITS_T = rescaled_attrs("time")
+UNITS_F = rescaled_attrs("force")
 
 
 @dataclass(frozen=True)
@@ -44,12 +47,13 @@ class Variable:
     dims: tuple
     dtype: str
     fill: object
-    units: str
+    units: str | dict  # a units string pint parses, or rescaled_attrs(kind) for a rescaled quantity
     long_name: str
     attrs: dict = field(default_factory=dict)
 
     def metadata(self) -> dict:
-        return {"units": self.units, "long_name": self.long_name, **self.attrs}
+        units = dict(self.units) if isinstance(self.units, dict) else {"units": self.units}
+        return {**units, "long_name": self.long_name, **self.attrs}
 
 
 #: Per-realisation results of every chain.
@@ -117,11 +121,15 @@ ALIGNED = (
              "standard error of the aligned pulse"),
 )
 
+#: Fixed-point sums are integers counting 2^-fixed_point_bits of the rescaled velocity (or its square).
+_FIXED = {"units": "1", "units_description": "integer count of 2^-fixed_point_bits (the store's attribute fixed_point_bits) "
+                                           "rescaled velocity units V_1 (V_1^2 for the sums of squares)"}
+
 #: The ``progress`` group: one storage chunk per run chunk.
 PROGRESS = (
-    Variable("sum_v", ("chunk", "chain", "granule", "time"), "int64", 0, "2^-fixed_point_bits V_1",
+    Variable("sum_v", ("chunk", "chain", "granule", "time"), "int64", 0, _FIXED,
              "sum over the chunk's successful realisations of round(v * 2^bits)"),
-    Variable("sum_v2", ("chunk", "chain", "granule", "time"), "int64", 0, "2^-fixed_point_bits V_1^2",
+    Variable("sum_v2", ("chunk", "chain", "granule", "time"), "int64", 0, _FIXED,
              "sum over the chunk's successful realisations of round(v^2 * 2^bits)"),
     Variable("n_valid", ("chunk", "chain"), "int64", 0, "1", "successful realisations of the chunk"),
     Variable("checksum", ("chunk", "checked"), "int64", 0, "1",
@@ -131,9 +139,9 @@ PROGRESS = (
 
 #: The aligned pulse's fixed-point sums per chunk, in the ``progress`` group (with ``lags`` only).
 PROGRESS_ALIGNED = (
-    Variable("sum_a", ("chunk", "chain", "granule", "lag"), "int64", 0, "2^-fixed_point_bits V_1",
+    Variable("sum_a", ("chunk", "chain", "granule", "lag"), "int64", 0, _FIXED,
              "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau) * 2^bits)"),
-    Variable("sum_a2", ("chunk", "chain", "granule", "lag"), "int64", 0, "2^-fixed_point_bits V_1^2",
+    Variable("sum_a2", ("chunk", "chain", "granule", "lag"), "int64", 0, _FIXED,
              "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau)^2 * 2^bits)"),
 )
 
@@ -160,7 +168,8 @@ def progress_variables(spec) -> tuple:
 def parameter_variables(family) -> tuple:
     """The family's random parameters as store variables (dims ``realization`` + the parameter's)."""
     fills = {"f": np.nan, "i": -1, "u": 0, "b": False}
-    return tuple(Variable(p.name, ("realization",) + tuple(p.dims), p.dtype, fills[np.dtype(p.dtype).kind], p.units, p.long_name)
+    return tuple(Variable(p.name, ("realization",) + tuple(p.dims), p.dtype, fills[np.dtype(p.dtype).kind],
+                          rescaled_attrs(p.units) if p.units in RESCALED else p.units, p.long_name)
                  for p in family.parameters())
 
 
@@ -255,15 +264,16 @@ def empty_dataset(spec, lazy: bool):
     coords = {
         "chain": ("chain", np.array(spec.chains, dtype=object).astype(str), {"long_name": "which chain of the realisation"}),
         "realization": ("realization", np.arange(spec.realizations),
-                        {"long_name": "realisation index i (random parameters from SeedSequence(seed, spawn_key=(i,)))"}),
-        "granule": ("granule", np.asarray(granules), {"long_name": granule_name}),
-        "time": ("time", np.asarray(spec.t_grid), {"units": UNITS_T, "long_name": "time"}),
-        "contact": ("contact", np.asarray(family.contact_coordinate()[0]), {"long_name": family.contact_coordinate()[1]}),
+                        {"long_name": "realisation index i (random parameters from SeedSequence(seed, spawn_key=(i,)))", "units": "1"}),
+        "granule": ("granule", np.asarray(granules), {"long_name": granule_name, "units": "1"}),
+        "time": ("time", np.asarray(spec.t_grid), {**UNITS_T, "long_name": "time"}),
+        "contact": ("contact", np.asarray(family.contact_coordinate()[0]), {"long_name": family.contact_coordinate()[1], "units": "1"}),
     }
-    for dim, (values, long_name) in family.dims().items():
-        coords[dim] = (dim, np.asarray(values), {"long_name": long_name})
+    for dim, (values, long_name) in family.dims().items():  # indices: dimensionless ("1"), strings have no units
+        values = np.asarray(values)
+        coords[dim] = (dim, values, {"long_name": long_name, **({"units": "1"} if values.dtype.kind in "iuf" else {})})
     if spec.lags is not None:
-        coords["lag"] = ("lag", np.asarray(spec.lags), {"units": UNITS_T,
+        coords["lag"] = ("lag", np.asarray(spec.lags), {**UNITS_T,
                                                         "long_name": "time tau after the realisation's own peak time at k"})
     variables = per_realisation_variables(family) + averaged_variables(spec)
     return xr.Dataset({v.name: var(v) for v in variables}, coords=coords, attrs=_attrs(spec))

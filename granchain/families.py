@@ -56,7 +56,7 @@ __all__ = [
     "family_from_record",
 ]
 
-_RADIUS_UNITS = "R_1 (reference radius)"
+_RADIUS_UNITS = "radius"  # rescaled: in units of the reference (large) granule's radius
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,9 @@ class RandomParameter:
     """One random parameter a family draws per realisation (a store variable).
 
     ``dims`` are its dimensions after ``realization`` (each named in the family's
-    :meth:`ChainFamily.dims`); ``dtype`` a NumPy dtype name.
+    :meth:`ChainFamily.dims`); ``dtype`` a NumPy dtype name; ``units`` a units string pint parses
+    (``"1"``) or, for a rescaled quantity, its kind (a key of :data:`granchain.units.RESCALED`:
+    ``"radius"``, ``"mass"``, ``"velocity"``), stored as units "1" with what it counts.
     """
 
     name: str
@@ -317,7 +319,7 @@ class _Decorated(ChainFamily):
                 "(decorated indices 2q-1, 2q); effective chain, between granules q and q+1")
 
     def parameters(self) -> tuple:
-        return (RandomParameter("small_radius", ("gap",), "float64", _RADIUS_UNITS.replace("reference", "large-granule"),
+        return (RandomParameter("small_radius", ("gap",), "float64", _RADIUS_UNITS,
                                 "radius of the small granule between large granules j and j+1"),)
 
     def dims(self) -> dict:
@@ -634,9 +636,9 @@ class CustomFamily(ChainFamily):
     def parameters(self) -> tuple:
         if not self.returns_chain:
             return (RandomParameter("radius", ("site",), "float64", _RADIUS_UNITS, "radius of the granule"),)
-        return (RandomParameter("mass", ("site",), "float64", "M_1 (reference mass)", "mass of the granule"),
+        return (RandomParameter("mass", ("site",), "float64", "mass", "mass of the granule"),
                 RandomParameter("stiffness", ("contact",), "float64", "1", "contact prefactor c_k (force c_k delta^(n-1))"),
-                RandomParameter("initial_velocity", (), "float64", "V_1", "velocity of granule 1 at t = 0"))
+                RandomParameter("initial_velocity", (), "float64", "velocity", "velocity of granule 1 at t = 0"))
 
     def dims(self) -> dict:
         M = self.size

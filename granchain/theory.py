@@ -59,6 +59,7 @@ from ._distributions import small_radius_distribution
 from ._effective import effective_parameters
 from ._validate import count, exponent
 from ._version import __version__
+from .units import rescaled_attrs
 
 __all__ = ["TheorySettings", "TransferTable", "stiffness_quadrature", "transfer_table", "formation_factors",
            "aligned_profiles", "sample_pulses", "averaged_pulse", "predict", "clear_cache", "cache_dir"]
@@ -532,8 +533,9 @@ def predict(distribution, n_large: int, n: float = HERTZ, *, samples: int = 20_0
     granule = np.arange(1, N + 1)
     sq = math.sqrt(samples)
 
-    def var(values, long_name):
-        return ("granule", np.asarray(values, dtype=float), {"units": one, "long_name": long_name})
+    def var(values, long_name):  # rescaled velocities and times: units "1", the kind recorded (granchain.units)
+        kind = "time" if "time" in long_name else "velocity"
+        return ("granule", np.asarray(values, dtype=float), {**rescaled_attrs(kind), "long_name": long_name})
 
     ds = xr.Dataset(
         {

@@ -64,7 +64,17 @@ Consequences for n = 5/2: alpha = (M_1 / R'_1^3) V_1^2 / a does not depend on th
 and goes as V_1^2, so L ~ R V_1^(4/5), T ~ R V_1^(-1/5), F_u ~ R^2 V_1^(6/5),
 energy ~ R^3 V_1^2.
 
-Why a small parser, not pint, for the command line: see the docstring of ``granchain/cli/_units.py``.
+Quantities with units (pint)
+----------------------------
+Every SI argument here (a material's E and rho, a radius, an impact speed, the prefactor ``a``)
+also takes a ``pint.Quantity`` or a string pint parses (``"200 GPa"``, ``"7.85 g/cm^3"``,
+``"3/16 in"``, ``"50 cm/s"``): ``scale("steel", "5 mm", "1 m/s")``. A bare number is SI.
+:meth:`Scale.to_quantity` returns rescaled results as ``pint.Quantity`` objects. pint is the
+scientific Python ecosystem's unit library (pint-xarray, MetPy and cf-xarray speak it), so
+quantities pass between granchain and the user's own code without conversions by hand; it is
+imported only when a quantity is parsed, so a run without units does not pay its ~0.2 s
+import. The quantities use pint's application registry (:func:`pint.get_application_registry`),
+the one ``pint.Quantity`` itself uses, so a user's quantities convert without mixing registries.
 """
 
 from __future__ import annotations
@@ -94,16 +104,93 @@ __all__ = [
     "QUANTITIES",
     "SI_UNITS",
     "VARIABLE_KINDS",
+    "DIMENSIONS",
+    "si_value",
+    "registry",
+    "RESCALED",
+    "rescaled_attrs",
 ]
 
 HERTZ = 2.5
 
+#: The SI unit of each kind of physical input or output (what a bare number means).
+DIMENSIONS = {"length": "m", "radius": "m", "speed": "m/s", "velocity": "m/s", "pressure": "Pa",
+              "density": "kg/m^3", "time": "s", "force": "N", "energy": "J", "mass": "kg", "dimensionless": ""}
 
-def _positive(name: str, value) -> float:
+# Words for messages: "--E needs a pressure (Young's modulus), got 5 m (a length)".
+_WORDS = {"length": "a length", "radius": "a length", "speed": "a speed", "velocity": "a speed",
+          "pressure": "a pressure", "density": "a density", "time": "a time", "force": "a force",
+          "energy": "an energy", "mass": "a mass", "dimensionless": "a dimensionless number"}
+
+
+def registry():
+    """pint's application registry, the one :class:`pint.Quantity` uses (imported on first call)."""
+    import pint
+
+    return pint.get_application_registry()
+
+
+def _is_quantity(value) -> bool:
+    # without importing pint: a pint Quantity is the only object here with these three
+    return all(hasattr(value, attr) for attr in ("magnitude", "units", "dimensionality"))
+
+
+def _dimension_word(ureg, dimensionality) -> str:
+    for kind, unit in DIMENSIONS.items():
+        if ureg.get_dimensionality(unit) == dimensionality:
+            return _WORDS[kind]
+    return f"a quantity of dimension {dimensionality}"
+
+
+def si_value(value, kind: str, name: str = "value", *, unit: str | None = None) -> float:
+    """``value`` in SI units of ``kind`` (a key of :data:`DIMENSIONS`) as a float.
+
+    ``value`` is a number (taken as SI), a ``pint.Quantity``, or a string pint parses
+    (``"5 mm"``, ``"3/16 in"``, ``"7.85 g/cm^3"``, ``"200 GPa"``, ``"50 cm/s"``; a string
+    without a unit is SI). ``unit`` overrides the SI unit of ``kind`` (the prefactor ``a``'s
+    N m^(1/2 - n)). Raises ValueError naming ``name``, the dimension it needs and the one it
+    got ("--radius needs a length, got 5 s (a time)") or the unit pint does not know.
+    """
+    if kind not in DIMENSIONS and unit is None:
+        raise ValueError(f"unknown kind of quantity {kind!r}; choose one of {', '.join(DIMENSIONS)}")
+    target = DIMENSIONS.get(kind, "") if unit is None else unit
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        return float(value)
+    if not (isinstance(value, str) or _is_quantity(value)):
+        raise ValueError(f"{name} must be a number (SI: {target or 'dimensionless'}), a pint.Quantity or a string "
+                         f"such as '5 mm', got {type(value).__name__}")
+    ureg = registry()
+    import pint
+
+    if isinstance(value, str):
+        text = value.strip()
+        try:
+            q = ureg.Quantity(text)
+        except pint.UndefinedUnitError as exc:
+            raise ValueError(f"{name}: unknown unit in {value!r} ({exc}); write e.g. '5 {target or '1'}' "
+                             f"(a bare number is SI: {target or 'dimensionless'})") from None
+        except Exception:  # noqa: BLE001 -- pint's tokenizer raises several kinds for text it cannot read
+            raise ValueError(f"{name}: cannot read {value!r} as a quantity; write a number and a unit, "
+                             f"e.g. '5 {target or '1'}'") from None
+        if not _is_quantity(q):  # pint returns a plain number for unitless text
+            return float(q)
+        if q.dimensionless and q.units == ureg.dimensionless:
+            return float(q.magnitude)  # "0.005": a bare number is SI
+    else:
+        q = value
+        if not isinstance(q, ureg.Quantity):  # a quantity of another registry: same magnitude, same unit name
+            q = ureg.Quantity(q.magnitude, str(q.units))
     try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
+        return float(q.to(target or "dimensionless").magnitude)
+    except pint.DimensionalityError:
+        want = _WORDS.get(kind, f"units of {target}")
+        raise ValueError(f"{name} needs {want}, got {value} ({_dimension_word(ureg, q.dimensionality)})") from None
+    except TypeError:
+        raise ValueError(f"{name} must be a single value, got {value!r}") from None
+
+
+def _positive(name: str, value, kind: str = "dimensionless", unit: str | None = None) -> float:
+    x = si_value(value, kind, name, unit=unit)
     if not math.isfinite(x) or x <= 0:
         raise ValueError(f"{name} must be finite and > 0 (SI units), got {value!r}")
     return x
@@ -115,12 +202,12 @@ class Material:
 
     Parameters
     ----------
-    E : float
-        Young's modulus in Pa (steel: about 2e11).
+    E : float, str or pint.Quantity
+        Young's modulus; a number is Pa (steel: about 2e11), or ``"200 GPa"``.
     nu : float
-        Poisson's ratio, -1 < nu < 1/2.
-    rho : float
-        Density in kg/m^3.
+        Poisson's ratio, -1 < nu < 1/2 (dimensionless).
+    rho : float, str or pint.Quantity
+        Density; a number is kg/m^3, or ``"7.85 g/cm^3"``.
     name : str
         A label (used in reports and Dataset attributes).
     source : str
@@ -134,12 +221,9 @@ class Material:
     source: str = field(default="", repr=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "E", _positive("E (Young's modulus, Pa)", self.E))
-        object.__setattr__(self, "rho", _positive("rho (density, kg/m^3)", self.rho))
-        try:
-            nu = float(self.nu)
-        except (TypeError, ValueError):
-            raise ValueError(f"nu (Poisson's ratio) must be a number, got {self.nu!r}") from None
+        object.__setattr__(self, "E", _positive("E (Young's modulus, Pa)", self.E, "pressure"))
+        object.__setattr__(self, "rho", _positive("rho (density, kg/m^3)", self.rho, "density"))
+        nu = si_value(self.nu, "dimensionless", "nu (Poisson's ratio)")
         if not (-1.0 < nu < 0.5):
             raise ValueError(f"nu (Poisson's ratio) must lie in (-1, 0.5) for an isotropic elastic solid, got {self.nu!r}")
         object.__setattr__(self, "nu", nu)
@@ -254,6 +338,11 @@ class Scale:
             raise ValueError(f"unknown quantity {kind!r}; choose one of {', '.join(QUANTITIES)}")
         return value * getattr(self, kind)
 
+    def to_quantity(self, value, kind: str):
+        """``value`` (rescaled, scalar or array) as a ``pint.Quantity`` in the SI unit of ``kind``:
+        ``scale.to_quantity(result.peak_time, "time").to("us")``."""
+        return registry().Quantity(self.to_si(value, kind), SI_UNITS[kind])
+
     def as_dict(self) -> dict:
         """The numbers (and the material) as a flat, JSON-ready dict with SI unit suffixes."""
         m = self.material
@@ -274,22 +363,23 @@ class Scale:
         )
 
 
-def scale(material: Material | str, radius: float, impact_speed: float, n: float = HERTZ, *, a: float | None = None) -> Scale:
+def scale(material: Material | str, radius, impact_speed, n: float = HERTZ, *, a=None) -> Scale:
     """The paper's Sec. II rescaling for spheres of one material.
 
     Parameters
     ----------
     material : Material or str
         The material (or a preset name, see :data:`~granchain.units.MATERIALS`).
-    radius : float
-        Radius R'_1 of the reference granule in m (rescaled radius 1: the struck granule
-        and, in a decorated chain, every large granule).
-    impact_speed : float
-        V_1 in m/s, the struck granule's initial speed (rescaled velocity 1).
+    radius : float, str or pint.Quantity
+        Radius R'_1 of the reference granule; a number is m, or ``"5 mm"``, ``"3/16 in"``
+        (rescaled radius 1: the struck granule and, in a decorated chain, every large granule).
+    impact_speed : float, str or pint.Quantity
+        V_1, the struck granule's initial speed; a number is m/s, or ``"50 cm/s"``
+        (rescaled velocity 1).
     n : float
         Exponent of the potential of Eq. (hertz-1). Hertz (spheres): 5/2.
-    a : float, optional
-        Contact prefactor in N m^(1/2 - n). Default (n = 5/2 only): Hertz,
+    a : float, str or pint.Quantity, optional
+        Contact prefactor; a number is N m^(1/2 - n). Default (n = 5/2 only): Hertz,
         :func:`~granchain.units.hertz_prefactor`. Required for any other n.
 
     Returns
@@ -302,8 +392,8 @@ def scale(material: Material | str, radius: float, impact_speed: float, n: float
         material = get_material(material)
     if not isinstance(material, Material):
         raise ValueError(f"material must be a granchain.units.Material or a preset name, got {type(material).__name__}")
-    radius = _positive("radius (m)", radius)
-    impact_speed = _positive("impact_speed (m/s)", impact_speed)
+    radius = _positive("radius (m)", radius, "length")
+    impact_speed = _positive("impact_speed (m/s)", impact_speed, "speed")
     n = _positive("n", n)
     if n <= 1:
         raise ValueError(f"n must be > 1 (potential (a/n) r' delta^n), got {n}")
@@ -318,7 +408,7 @@ def scale(material: Material | str, radius: float, impact_speed: float, n: float
             )
         a = hertz_prefactor(material)
     else:
-        a = _positive("a (contact prefactor, N m^(1/2 - n))", a)
+        a = _positive("a (contact prefactor, N m^(1/2 - n))", a, unit=f"N * m ** ({0.5 - n!r})")
     mass = 4.0 / 3.0 * math.pi * material.rho * radius**3          # M_1 = (4/3) pi rho R'_1^3 (Sec. II)
     alpha = mass * impact_speed**2 / (a * radius ** (n + 0.5))     # alpha (Sec. II)
     length = radius * alpha ** (1.0 / n)                           # y = R'_1 alpha^(1/n) x
@@ -348,6 +438,28 @@ VARIABLE_KINDS = {
     "peak_wall_force_time": "time",
 }
 """Rescaled variable name -> kind of quantity (see :data:`QUANTITIES`)."""
+
+#: What each rescaled quantity counts (paper Sec. II): the ``units_description`` of stored variables.
+RESCALED = {
+    "velocity": "rescaled velocity, in units of V_1 (the struck granule's initial speed; paper Sec. II)",
+    "time": "rescaled time, in units of T = (R'_1 / V_1) alpha^(1/n) (paper Sec. II)",
+    "force": "rescaled force, in units of M_1 L / T^2 (paper Eq. motion_rescaled)",
+    "energy": "rescaled energy, in units of M_1 V_1^2 (paper Sec. II)",
+    "length": "rescaled length, in units of L = R'_1 alpha^(1/n) (paper Sec. II)",
+    "radius": "rescaled radius, in units of R'_1 (the reference, large granule's radius)",
+    "mass": "rescaled mass, in units of M_1 (the reference granule's mass)",
+}
+
+
+def rescaled_attrs(kind: str) -> dict:
+    """Attributes of a stored rescaled variable: ``units`` "1" (the paper's rescaled numbers are
+    dimensionless, so pint, pint-xarray's ``quantify()`` and UDUNITS read them), the kind of
+    quantity in ``rescaled_quantity`` (``Scale.<kind>`` converts it to SI: :func:`dataset_to_physical`)
+    and what it counts in ``units_description``."""
+    if kind not in RESCALED:
+        raise ValueError(f"unknown rescaled quantity {kind!r}; choose one of {', '.join(RESCALED)}")
+    return {"units": "1", "rescaled_quantity": kind, "units_description": RESCALED[kind]}
+
 
 SUFFIX = "_si"
 """Suffix of the SI variables :func:`dataset_to_physical` adds (``peak_time`` -> ``peak_time_si``)."""
@@ -422,24 +534,27 @@ def _check_scale(scale) -> None:
 def dataset_to_physical(ds, scale: Scale):
     """A new ``xarray.Dataset``: ``ds`` plus SI copies of its rescaled variables.
 
-    For each variable of :data:`VARIABLE_KINDS` present in ``ds`` (``peak_time``,
-    ``peak_velocity``, ``mean_velocity``, ``small_radius``, ..., and contact or wall
-    forces when present) a variable ``<name>_si`` with SI ``units`` is added, and the
+    For each rescaled variable of ``ds`` (named by its ``rescaled_quantity`` attribute; in
+    stores written before that attribute existed, the names of :data:`VARIABLE_KINDS`:
+    ``peak_time``, ``peak_velocity``, ``mean_velocity``, ``small_radius``, ..., and contact or
+    wall forces when present) a variable ``<name>_si`` with SI ``units`` is added, and the
     ``time`` coordinate gets a companion ``time_si`` coordinate. The rescaled variables and
     ``ds`` itself are untouched (lazy, Dask-backed data stay lazy). The scale is recorded in
     attributes ``physical_*``.
     """
     _check_scale(scale)
     new = {}
-    for name, kind in VARIABLE_KINDS.items():
-        if name in ds.variables and name not in ds.coords:
-            var = ds[name]
-            attrs = {
-                "units": SI_UNITS[kind],
-                "long_name": f"{var.attrs.get('long_name', name)} (SI)",
-                "rescaled_variable": name,
-            }
-            new[name + SUFFIX] = (var * getattr(scale, kind)).assign_attrs(attrs)
+    for name, var in ds.data_vars.items():
+        # the kind a variable records (stores written since units became "1"), else the table (older stores)
+        kind = var.attrs.get("rescaled_quantity") or VARIABLE_KINDS.get(name)
+        if kind not in SI_UNITS or name.endswith(SUFFIX):
+            continue
+        attrs = {
+            "units": SI_UNITS[kind],
+            "long_name": f"{var.attrs.get('long_name', name)} (SI)",
+            "rescaled_variable": name,
+        }
+        new[name + SUFFIX] = (var * getattr(scale, kind)).assign_attrs(attrs)
     out = ds.assign(new)
     if "time" in ds.coords:
         out = out.assign_coords(time_si=("time", np.asarray(ds["time"].values, dtype=float) * scale.time,

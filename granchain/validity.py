@@ -45,6 +45,7 @@ from . import analysis, bca
 from ._distributions import Uniform, as_distribution
 from ._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
 from ._version import __version__
+from .units import rescaled_attrs
 
 __all__ = ["MEASURES", "DEFAULT_ALPHAS", "DEFAULT_BETAS", "QUICK", "validity_map", "compare_distributions",
            "point_seed", "compare_paired", "contour_beta", "default_distributions", "report_section"]
@@ -218,13 +219,22 @@ _EXTRA = {
 }
 
 
+def _unit_attrs(units: str) -> dict:
+    """A ``units`` string pint and UDUNITS parse ("1"); what the number means in ``units_description``."""
+    if units == _REL:
+        return {"units": "1", "units_description": "relative error, a fraction (0.01 = 1 %)"}
+    if units == "rescaled time":
+        return rescaled_attrs("time")
+    return {"units": units}
+
+
 def _variables(dims, shape):
     data = {}
     for name, (units, long) in MEASURES.items():
-        data[name] = (dims, np.full(shape, np.nan), {"units": units, "long_name": long})
-        data[name + "_stderr"] = (dims, np.full(shape, np.nan), {"units": units, "long_name": "jackknife standard error of " + name})
+        data[name] = (dims, np.full(shape, np.nan), {**_unit_attrs(units), "long_name": long})
+        data[name + "_stderr"] = (dims, np.full(shape, np.nan), {**_unit_attrs(units), "long_name": "jackknife standard error of " + name})
     for name, (units, long) in _EXTRA.items():
-        data[name] = (dims, np.full(shape, np.nan), {"units": units, "long_name": long})
+        data[name] = (dims, np.full(shape, np.nan), {**_unit_attrs(units), "long_name": long})
     return data
 
 
@@ -303,12 +313,15 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
         raise ValueError(f"need 0 < alphas and betas <= 1 (small radii in units of the large), got alphas={list(a)}, betas={list(b)}")
     shape = (a.size, b.size, len(Ns))
     ds = xr.Dataset(_variables(("alpha", "beta", "n_large"), shape),
-                    coords={"alpha": ("alpha", a, {"long_name": "smallest small radius (units of the large radius)"}),
-                            "beta": ("beta", b, {"long_name": "largest small radius (units of the large radius)"}),
-                            "n_large": ("n_large", np.array(Ns), {"long_name": "number N of large granules"})},
+                    coords={"alpha": ("alpha", a, {**rescaled_attrs("radius"), "long_name": "smallest small radius (units of the large radius)"}),
+                            "beta": ("beta", b, {**rescaled_attrs("radius"), "long_name": "largest small radius (units of the large radius)"}),
+                            "n_large": ("n_large", np.array(Ns), {"long_name": "number N of large granules", "units": "1"})},
                     attrs={**_attrs("validity map", realizations, seed, blocks, integrator),
                            "distribution": "uniform on [alpha, beta]"})
     points = [(i, j, k) for k in range(len(Ns)) for i in range(a.size) for j in range(b.size) if a[i] < b[j]]
+    if not points:  # refused before anything is written: an empty map would look like a finished one
+        raise ValueError(f"no grid point has alpha < beta (alphas={[float(x) for x in a]}, betas={[float(x) for x in b]}): "
+                         "the small radii are uniform on [alpha, beta], so give at least one alpha below a beta")
     root = Path(out)
     for i, j, k in tqdm(points, desc="validity map", unit=" points", disable=not progress, dynamic_ncols=True):
         dist = Uniform(a[i], b[j])
@@ -357,14 +370,14 @@ def compare_distributions(out, distributions=None, *, n_large=(6, 26), realizati
     names = list(dists)
     ds = xr.Dataset(_variables(("distribution", "n_large"), (len(names), len(Ns))),
                     coords={"distribution": ("distribution", np.array(names, dtype=object).astype(str)),
-                            "n_large": ("n_large", np.array(Ns))},
+                            "n_large": ("n_large", np.array(Ns), {"long_name": "number N of large granules", "units": "1"})},
                     attrs=_attrs("distribution comparison", realizations, seed, blocks, integrator))
     ds["label"] = ("distribution", np.array([d.label() for d in dists.values()], dtype=object).astype(str))
-    ds["radius_mean"] = ("distribution", [d.expect(lambda r: r) for d in dists.values()], {"long_name": "mean small radius"})
+    ds["radius_mean"] = ("distribution", [d.expect(lambda r: r) for d in dists.values()], {**rescaled_attrs("radius"), "long_name": "mean small radius"})
     ds["radius_std"] = ("distribution", [math.sqrt(max(d.expect(lambda r: r * r) - d.expect(lambda r: r) ** 2, 0.0))
-                                         for d in dists.values()], {"long_name": "std of the small radius"})
+                                         for d in dists.values()], {**rescaled_attrs("radius"), "long_name": "std of the small radius"})
     ds["fraction_above_limit"] = ("distribution", [1.0 - float(d.cdf(EFFECTIVE_VALIDITY_LIMIT)) for d in dists.values()],
-                                  {"long_name": f"probability of a small radius above {EFFECTIVE_VALIDITY_LIMIT}"})
+                                  {"long_name": f"probability of a small radius above {EFFECTIVE_VALIDITY_LIMIT}", "units": "1"})
     root = Path(out)
     jobs = [(i, k) for k in range(len(Ns)) for i in range(len(names))]
     for i, k in tqdm(jobs, desc="distributions", unit=" points", disable=not progress, dynamic_ncols=True):
@@ -417,10 +430,15 @@ def report_section(validity=None, distributions=None, dephasing=None) -> str:
                             ("averaged_pulse_peak_error_effective", "effective chain, averaged-pulse peak"),
                             ("arrival_time_error_bca", "BCA, mean arrival time")):
             for level in (0.01, 0.05):
-                c = contour_beta(v, name, level)
-                txt = ", ".join(f"N={N}, alpha={a:g}: {'< ' + format(min(v.beta.values), 'g') if not np.isfinite(b) else format(b, 'g')}"
-                                for (N, a), b in c.items())
-                lines.append(f"- {label}, |error| < {100 * level:g} % up to beta = {txt}")
+                parts = []
+                for (N, a), b in contour_beta(v, name, level).items():
+                    valid = np.isfinite(v[name].sel(n_large=N, alpha=a).values)
+                    if not valid.any():  # no beta above this alpha in the grid: nothing to say
+                        continue
+                    where = f"N = {N}, alpha = {a:g}"
+                    parts.append(f"up to beta = {b:g} ({where})" if np.isfinite(b) else
+                                 f"not even at beta = {float(v['beta'].values[valid][0]):g} ({where})")
+                lines.append(f"- {label}, |error| < {100 * level:g} %: {'; '.join(parts) or 'no point computed'}")
         lines.append("")
         lines.append("| N | alpha | beta | arrival (eff.) | std (eff.) | KS (eff.) | <v>-peak (eff.) | <max v> (eff.) | arrival (BCA) | width ratio (BCA) | shift (BCA) |")
         lines.append("|---|---|---|---|---|---|---|---|---|---|---|")

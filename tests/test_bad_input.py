@@ -1,4 +1,4 @@
-"""Bad input fails with a message naming the parameter (API) or option (CLI), never a traceback (issue 10)."""
+"""Bad input fails with a message naming the parameter (API) or option (CLI), never a traceback; inputs that cannot work are refused before anything runs or is written."""
 
 from __future__ import annotations
 
@@ -95,3 +95,74 @@ def test_cli_names_the_option_without_traceback(argv, name, tmp_path, capsys):
     assert rc == 2, err
     assert name in err and "error" in err
     assert "Traceback" not in err
+
+
+# -- inputs that used to run silently --------------------------------------------------------------
+
+def test_empty_validity_grid_is_refused_before_anything_is_written(tmp_path, capsys):
+    from granchain import validity
+
+    with pytest.raises(ValueError, match=r"no grid point has alpha < beta \(alphas=\[0.5\], betas=\[0.1\]\)"):
+        validity.validity_map(tmp_path / "api", alphas=[0.5], betas=[0.1], n_large=4, progress=False)
+    assert not (tmp_path / "api").exists()
+    out = tmp_path / "v"
+    code = main(["validity", "--out", str(out), "--alphas", "0.5", "--betas", "0.1", "--quick"])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and stdout == "" and "give at least one alpha below a beta" in err
+    assert not out.exists()
+
+
+def test_validity_report_reads_sensibly_where_a_row_has_no_point(tmp_path):
+    """alpha = 0.3 has no beta above it in the grid: the summary says nothing about it, instead of
+    splicing "N=6, alpha=0.3: < 0.1" into the sentence."""
+    from granchain import validity
+
+    ds = validity.validity_map(tmp_path / "v", alphas=[0.05, 0.3], betas=[0.1, 0.2], n_large=4, realizations=20, blocks=4,
+                               progress=False, netcdf=False)
+    text = validity.report_section(ds)
+    assert "alpha = 0.3" not in text and "alpha=0.3" not in text
+    for line in text.splitlines():
+        if line.startswith("- "):
+            assert "(N = 4, alpha = 0.05)" in line, line
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda: gc.DP5(rtol=2), "rtol = 2 must lie in (0, 1)"),
+    (lambda: gc.RKN4(rtol=1.0), "rtol = 1 must lie in (0, 1)"),
+    (lambda: gc.DOP853(atol=1.5), "atol = 1.5 must lie in (0, 1)"),
+    (lambda: gc.DP5.relaxed(0.005), "rtol * relaxed_factor = 5 must stay below 1"),
+    (lambda: gc.DP5(rtol=0), "rtol must be > 0"),
+])
+def test_tolerances_outside_zero_one_are_refused(make, words):
+    with pytest.raises(ValueError) as exc:
+        make()
+    assert words in str(exc.value)
+
+
+def test_cli_ensemble_with_rtol_2_writes_no_store(tmp_path, capsys):
+    store = tmp_path / "r.zarr"
+    code = main(["ensemble", "--large", "6", "--realizations", "10", "--rtol", "2", "--out", str(store)])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "" and "rtol = 2 must lie in (0, 1)" in err
+    assert not store.exists()
+
+
+def test_integrator_dict_may_name_kinds_the_run_does_not_compute():
+    """One dict for runs of either chain: the unused kind's integrator is ignored, the results are
+    bitwise those of the dict without it."""
+    fam = gc.RandomDecorated(4)
+    kw = dict(realizations=4, chains=("decorated",), progress=False, threads=1)
+    extra = gc.run_ensemble(fam, integrator={"decorated": gc.DP5(1e-6, 1e-9), "effective": gc.Verlet(0.01)}, **kw)
+    alone = gc.run_ensemble(fam, integrator={"decorated": gc.DP5(1e-6, 1e-9)}, **kw)
+    np.testing.assert_array_equal(extra["peak_time"].values, alone["peak_time"].values)
+    np.testing.assert_array_equal(extra["peak_velocity"].values, alone["peak_velocity"].values)
+
+
+@pytest.mark.parametrize("integrator, words", [
+    ({"decorated": gc.DP5(), "efective": gc.DP5()}, "names chain kinds ['efective'] that the family RandomDecorated does not have"),
+    ({"effective": gc.DP5()}, "no integrator for the chain kinds ['decorated'] this run computes"),
+])
+def test_integrator_dict_errors_say_what_is_wrong(integrator, words):
+    with pytest.raises(ValueError) as exc:
+        gc.run_ensemble(gc.RandomDecorated(4), realizations=4, chains=("decorated",), integrator=integrator, progress=False)
+    assert words in str(exc.value)

@@ -283,26 +283,54 @@ def test_get_material_aliases():
 @pytest.mark.parametrize("text, kind, value", [
     ("5mm", "length", 5e-3), ("5 mm", "length", 5e-3), ("0.005 m", "length", 5e-3), ("0.005", "length", 5e-3),
     ("5e-3m", "length", 5e-3), ("500 um", "length", 5e-4), ("500µm", "length", 5e-4), ("0.5cm", "length", 5e-3),
+    ("3/16 in", "length", 0.0047625), ("3/16in", "length", 0.0047625), ("0.25 inch", "length", 0.00635),
     ("1m/s", "speed", 1.0), ("100 cm/s", "speed", 1.0), ("3.6 km/h", "speed", 1.0), ("250mm/s", "speed", 0.25),
+    ("50 cm/s", "speed", 0.5), ("1 ft/s", "speed", 0.3048),
     ("200GPa", "pressure", 2e11), ("193 GPa", "pressure", 1.93e11), ("1.46e9", "pressure", 1.46e9),
-    ("7850 kg/m^3", "density", 7850.0), ("7.85 g/cm^3", "density", 7850.0), ("2200kg/m3", "density", 2200.0),
+    ("200 GPa", "pressure", 2e11), ("2e11 N/m^2", "pressure", 2e11), ("29e6 psi", "pressure", 29e6 * 6894.757293168361),
+    ("7850 kg/m^3", "density", 7850.0), ("7.85 g/cm^3", "density", 7850.0), ("2200kg/m**3", "density", 2200.0),
+    ("7.85 g/cc", "density", 7850.0),
 ])
 def test_parse_quantity(text, kind, value):
-    assert parse_quantity(text, kind, "--x") == pytest.approx(value, rel=1e-14)
+    """pint reads the quantity; a bare number is SI."""
+    assert parse_quantity(text, kind, "--x") == pytest.approx(value, rel=1e-13)
 
 
 @pytest.mark.parametrize("text, kind, words", [
-    ("5 mmm", "length", r"--opt: unknown unit 'mmm' in '5 mmm'; use one of: m, cm, mm"),
-    ("1 m/s", "length", r"--opt: '1 m/s' is a speed, expected a length"),
-    ("5mm", "speed", r"--opt: '5mm' is a length, expected a speed"),
-    ("fast", "speed", r"--opt: expected a number with a unit"),
-    ("-5 mm", "length", r"--opt: must be > 0"),
-    ("0 m/s", "speed", r"--opt: must be > 0"),
-    ("5 furlongs", "length", r"unknown unit 'furlongs'"),
+    ("5 mmm", "length", r"--opt: unknown unit in '5 mmm' \('mmm' is not defined"),
+    ("1 m/s", "length", r"--opt needs a length, got 1 m/s \(a speed\)"),
+    ("5mm", "speed", r"--opt needs a speed, got 5mm \(a length\)"),
+    ("5 s", "length", r"--opt needs a length, got 5 s \(a time\)"),
+    ("200 GPa", "density", r"--opt needs a density, got 200 GPa \(a pressure\)"),
+    ("fast", "speed", r"--opt: unknown unit in 'fast'"),
+    ("5 m m/", "length", r"--opt: cannot read '5 m m/' as a quantity"),
+    ("-5 mm", "length", r"--opt must be > 0, got '-5 mm': a radius is a size"),
+    ("0 m/s", "speed", r"--opt must be > 0, got '0 m/s': the impact speed"),
+    ("5 furlongs", "speed", r"needs a speed, got 5 furlongs \(a length\)"),
 ])
 def test_parse_quantity_errors_name_the_option(text, kind, words):
     with pytest.raises(ValueError, match=words):
         parse_quantity(text, kind, "--opt")
+
+
+def test_api_takes_pint_quantities_and_strings():
+    """scale() and Material take pint.Quantity objects (of pint's application registry or another
+    one) and strings; the result equals the SI-float call, and Scale.to_quantity returns pint."""
+    pint = pytest.importorskip("pint")
+    ureg = pint.get_application_registry()
+    ref = units.scale(units.STEEL, 0.0047625, 0.5)
+    for radius, speed in ((ureg.Quantity(3 / 16, "in"), ureg.Quantity(50, "cm/s")), ("3/16 in", "50 cm/s"),
+                          (pint.UnitRegistry().Quantity(4.7625, "mm"), "0.5 m/s")):
+        s = units.scale("steel", radius, speed)
+        assert s.time == pytest.approx(ref.time, rel=1e-13) and s.force == pytest.approx(ref.force, rel=1e-13)
+    m = units.Material("200 GPa", 0.3, ureg.Quantity(7.85, "g/cm^3"))
+    assert (m.E, m.rho) == (pytest.approx(2e11), pytest.approx(7850.0))
+    q = ref.to_quantity(np.array([1.0, 2.0]), "time")
+    assert isinstance(q, ureg.Quantity) and q.to("s").magnitude[1] == pytest.approx(2 * ref.time)
+    with pytest.raises(ValueError, match=r"radius \(m\) needs a length, got 5 second \(a time\)"):
+        units.scale("steel", ureg.Quantity(5, "s"), 1.0)
+    with pytest.raises(ValueError, match=r"E \(Young's modulus, Pa\) needs a pressure"):
+        units.Material("7850 kg/m^3", 0.3, 7850.0)
 
 
 def _parse(*argv):
@@ -367,11 +395,17 @@ def test_cli_without_units_prints_no_physical(capsys):
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--radius", "5 mmm", "--material", "steel", "--impact-speed", "1m/s"], "argument --radius: unknown unit 'mmm'"),
-    (["--radius", "5mm", "--material", "steel", "--impact-speed", "1 mm"], "argument --impact-speed: '1 mm' is a length"),
+    (["--radius", "5 mmm", "--material", "steel", "--impact-speed", "1m/s"], "argument --radius: unknown unit in '5 mmm'"),
+    (["--radius", "5mm", "--material", "steel", "--impact-speed", "1 mm"], "argument --impact-speed: needs a speed, got 1 mm (a length)"),
+    (["--radius", "5 s", "--material", "steel", "--impact-speed", "1m/s"], "argument --radius: needs a length, got 5 s (a time)"),
     (["--radius", "5mm", "--material", "wood", "--impact-speed", "1m/s"], "unknown material 'wood'"),
     (["--radius", "5mm", "--impact-speed", "1m/s"], "need a material"),
     (["--material", "steel", "--radius", "5mm", "--impact-speed", "1m/s", "--n", "3"], "only n = 5/2"),
+    # negative values reach the option's own check (argparse alone would say "expected one argument")
+    (["--material", "steel", "--radius", "5mm", "--impact-speed", "-1m/s"], "argument --impact-speed: must be > 0, got '-1m/s'"),
+    (["--E", "-1GPa", "--nu", "0.3", "--rho", "7850", "--radius", "5mm", "--impact-speed", "1m/s"],
+     "argument --E: must be > 0, got '-1GPa': Young's modulus"),
+    (["--material", "steel", "--radius", "-.5e-3", "--impact-speed", "1m/s"], "argument --radius: must be > 0"),
 ])
 def test_cli_bad_units_exit_2(capsys, argv, words):
     try:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 import warnings
 
@@ -39,9 +40,28 @@ def _warning_to_stderr(message, category, filename, lineno, file=None, line=None
     print(f"warning: {message}", file=sys.stderr)
 
 
+#: A value that starts like a negative number ("-1m/s", "-1e-3", "-.5GPa"): argparse would read it
+#: as an option (it takes only plain "-1" and "-0.5" for numbers), and fail with "expected one argument".
+_NEGATIVE_VALUE = re.compile(r"^-\.?\d")
+
+
+def attach_negative_values(argv: list[str]) -> list[str]:
+    """``--opt -1m/s`` -> ``--opt=-1m/s``, so a negative quantity reaches the option's own check
+    (which says why it is refused) instead of argparse's "expected one argument". No option name
+    starts with a digit, so the joined token cannot have meant anything else."""
+    out = []
+    for token in argv:
+        if (out and _NEGATIVE_VALUE.match(token) and out[-1].startswith("--") and "=" not in out[-1]
+                and len(out[-1]) > 2):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(attach_negative_values(list(sys.argv[1:] if argv is None else argv)))
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

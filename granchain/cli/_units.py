@@ -4,68 +4,41 @@ Any sub-command can take them: :func:`add_unit_arguments` registers the options 
 parser, :func:`scale_from_args` turns the parsed namespace into a
 :class:`granchain.units.Scale` (or None when no unit option was given).
 
-Why a small parser and not ``pint``: the command line needs four kinds of quantity
-(length, speed, pressure, density) with a handful of spellings each, and the API takes
-plain SI floats, so a unit library would only live at this boundary. A table of about
-thirty units is about sixty lines, has no dependency and no import cost (pint adds four
-packages and ~0.3 s to every ``granchain`` call), and its errors name the option and list
-the units it knows (``--radius: unknown unit 'mmm' in '5 mmm'; use one of: m, cm, mm, ...``)
-where pint raises ``UndefinedUnitError`` or ``DimensionalityError`` that would need
-wrapping anyway. A bare number is taken in SI units (m, m/s, Pa, kg/m^3).
+The values are read by pint (:func:`granchain.units.si_value`), so every unit pint knows
+works: ``5mm``, ``"3/16 in"``, ``"50 cm/s"``, ``200GPa``, ``"7.85 g/cm^3"``; a bare number is
+SI (m, m/s, Pa, kg/m^3). pint is imported only when one of these options is given.
 """
 
 from __future__ import annotations
 
 import argparse
-import re
 
-__all__ = ["UNITS", "parse_quantity", "add_unit_arguments", "scale_from_args", "has_unit_arguments"]
+__all__ = ["parse_quantity", "add_unit_arguments", "scale_from_args", "has_unit_arguments"]
 
-# kind -> {spelling: factor to SI}. Spellings are matched exactly after removing spaces.
-UNITS = {
-    "length": {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6, "nm": 1e-9, "in": 0.0254},
-    "speed": {"m/s": 1.0, "cm/s": 1e-2, "mm/s": 1e-3, "km/h": 1 / 3.6},
-    "pressure": {"Pa": 1.0, "kPa": 1e3, "MPa": 1e6, "GPa": 1e9, "N/m^2": 1.0, "N/m2": 1.0},
-    "density": {"kg/m^3": 1.0, "kg/m3": 1.0, "g/cm^3": 1e3, "g/cm3": 1e3, "g/cc": 1e3},
+#: Why a quantity must be positive, for the message that refuses a negative or zero value.
+_WHY_POSITIVE = {
+    "length": "a radius is a size",
+    "speed": "the impact speed is the struck granule's speed into the chain (granchain strikes the first "
+             "granule; to strike the other end, reverse the list of radii)",
+    "pressure": "Young's modulus of a stable elastic solid is positive",
+    "density": "a density is positive",
 }
-SI = {"length": "m", "speed": "m/s", "pressure": "Pa", "density": "kg/m^3"}
-
-_NUMBER = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*(.*?)\s*$")
 
 
-def _kind_of(unit: str) -> str | None:
-    for kind, table in UNITS.items():
-        if unit in table:
-            return kind
-    return None
+def parse_quantity(text, kind: str, option: str = "value") -> float:
+    """``text`` (``"5mm"``, ``"3/16 in"``, ``"0.005"``, ``"1 m/s"``, ``"200GPa"``) in SI units, > 0.
 
-
-def parse_quantity(text: str, kind: str, option: str = "value") -> float:
-    """``text`` (``"5mm"``, ``"5 mm"``, ``"0.005"``, ``"1 m/s"``, ``"200GPa"``) in SI units.
-
-    ``kind`` is one of ``length``, ``speed``, ``pressure``, ``density``. Raises
-    ValueError with a message that names ``option`` and the units it accepts.
+    ``kind`` is ``length``, ``speed``, ``pressure`` or ``density`` (see
+    :data:`granchain.units.DIMENSIONS`). Raises ValueError with a message that names
+    ``option``, the dimension it needs and, for a value <= 0, why it must be positive.
     """
-    if kind not in UNITS:
-        raise ValueError(f"unknown kind of quantity {kind!r}; choose one of {', '.join(UNITS)}")
-    match = _NUMBER.match(str(text))
-    if not match:
-        raise ValueError(f"{option}: expected a number with a unit, e.g. '5 {SI[kind]}', got {text!r}")
-    value, unit = float(match.group(1)), match.group(2).replace(" ", "")
-    if not unit:
-        factor = 1.0
-    elif unit in UNITS[kind]:
-        factor = UNITS[kind][unit]
-    else:
-        known = ", ".join(u for u in UNITS[kind] if u != "μm")  # (Greek mu: accepted, not listed twice)
-        other = _kind_of(unit)
-        if other is not None:
-            raise ValueError(f"{option}: {text!r} is a {other}, expected a {kind} in {known}")
-        raise ValueError(f"{option}: unknown unit {unit!r} in {text!r}; use one of: {known} (a bare number is in {SI[kind]})")
-    result = value * factor
-    if not result > 0:
-        raise ValueError(f"{option}: must be > 0, got {text!r}")
-    return result
+    from ..units import si_value
+
+    value = si_value(text, kind, option)
+    if not value > 0:
+        why = _WHY_POSITIVE.get(kind, "it must be positive")
+        raise ValueError(f"{option} must be > 0, got {text!r}: {why}")
+    return value
 
 
 def _type(kind: str, option: str):
@@ -73,16 +46,19 @@ def _type(kind: str, option: str):
         try:
             return parse_quantity(text, kind, option)
         except ValueError as exc:
-            # argparse prefixes "argument --option:"; keep the rest of the message.
-            raise argparse.ArgumentTypeError(str(exc).split(": ", 1)[1]) from None
+            # argparse prefixes "argument --option: "; drop our own copy of the option's name.
+            message = str(exc)
+            raise argparse.ArgumentTypeError(message[len(option):].lstrip(": ") if message.startswith(option) else message) from None
 
     convert.__name__ = kind  # argparse names the type in some messages
     return convert
 
 
 def _poisson(text: str) -> float:
+    from ..units import si_value
+
     try:
-        return float(text)
+        return si_value(text, "dimensionless", "--nu")
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a dimensionless number such as 0.3, got {text!r}") from None
 
@@ -101,19 +77,21 @@ def add_unit_arguments(parser) -> None:
     g = parser.add_argument_group(
         "physical units",
         "print physical values alongside the rescaled ones (paper Sec. II rescaling; granchain.units). Give "
-        "--material NAME or all of --E --nu --rho, and --radius and --impact-speed. Quantities take units "
-        "('5mm', '5 mm', '1m/s', '100 cm/s', '200GPa', '7850 kg/m^3'); a bare number is SI.",
+        "--material NAME or all of --E --nu --rho, and --radius and --impact-speed. Quantities take any unit "
+        "pint knows ('5mm', '3/16in', '50cm/s', '200GPa', '7.85g/cm^3'; quote a value with spaces: "
+        "'3/16 in'); a bare number is SI.",
     )
     g.add_argument("--material", metavar="NAME", help=f"a preset material: {', '.join(MATERIALS)}")
     g.add_argument("--E", dest="E", metavar="MODULUS", type=_type("pressure", "--E"), help="Young's modulus, e.g. 200GPa")
     g.add_argument("--nu", dest="nu", metavar="RATIO", type=_poisson, help="Poisson's ratio, e.g. 0.3")
     g.add_argument("--rho", dest="rho", metavar="DENSITY", type=_type("density", "--rho"), help="density, e.g. 7850kg/m^3 or 7.85g/cm^3")
     g.add_argument("--radius", metavar="LENGTH", type=_type("length", "--radius"),
-                   help="radius of the reference (struck, large) granule, e.g. 5mm")
+                   help="radius of the reference (struck, large) granule, e.g. 5mm or '3/16 in'")
     g.add_argument("--impact-speed", dest="impact_speed", metavar="SPEED", type=_type("speed", "--impact-speed"),
-                   help="speed of the struck granule, e.g. 1m/s")
-    g.add_argument("--contact-prefactor", dest="contact_prefactor", metavar="A", type=float,
-                   help="the paper's a in N m^(1/2 - n) (force a r' delta^(n-1)); default: Hertz from E and nu, n = 5/2 only")
+                   help="speed of the struck granule, e.g. 1m/s or '50 cm/s'")
+    g.add_argument("--contact-prefactor", dest="contact_prefactor", metavar="A",
+                   help="the paper's a (force a r' delta^(n-1)); a number is N m^(1/2 - n); default: Hertz from E and nu, "
+                        "n = 5/2 only")
 
 
 def has_unit_arguments(args) -> bool:
@@ -147,4 +125,5 @@ def scale_from_args(args, n: float | None = None):
         raise ValueError(f"physical units need {' and '.join(missing)} (e.g. --radius 5mm --impact-speed 1m/s)")
     if n is None:
         n = getattr(args, "n", None) or 2.5
+    # --contact-prefactor: a number (N m^(1/2 - n)) or a quantity string; scale() reads both
     return scale(material, args.radius, args.impact_speed, n=n, a=getattr(args, "contact_prefactor", None))

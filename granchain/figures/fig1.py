@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..units import rescaled_attrs
 from ._style import COLORS, TIME_LABEL, VELOCITY_UNITS, axes
 
 
@@ -21,11 +22,11 @@ class Fig1Data:
     def to_dataset(self):
         import xarray as xr
 
-        ds = xr.Dataset(coords={"granule": self.granule, "time": ("time", self.time, {"units": "rescaled time"})},
+        ds = xr.Dataset(coords={"granule": ("granule", self.granule, {"long_name": "large granule index k (1-based)", "units": "1"}), "time": ("time", self.time, rescaled_attrs("time"))},
                         attrs={"figure": "paper Fig. 1", "realizations": self.realizations})
-        ds["decorated"] = (("granule", "time"), self.decorated, {"long_name": "<v_k(t)>, decorated chain", "units": "V_1"})
+        ds["decorated"] = (("granule", "time"), self.decorated, {"long_name": "<v_k(t)>, decorated chain", **rescaled_attrs("velocity")})
         if self.effective is not None:
-            ds["effective"] = (("granule", "time"), self.effective, {"long_name": "<v_k(t)>, effective chain", "units": "V_1"})
+            ds["effective"] = (("granule", "time"), self.effective, {"long_name": "<v_k(t)>, effective chain", **rescaled_attrs("velocity")})
         return ds
 
 

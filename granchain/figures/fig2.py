@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import analysis
+from ..units import rescaled_attrs
 from ._style import COLORS, MARKERS, VELOCITY_UNITS, panel_pair
 
 
@@ -41,11 +42,11 @@ class Fig2Data:
                                "fit": "unweighted least squares", "main_chain": self.main})
         for c in self.chains:
             p, m = self.peaks[c], self.mean_peaks[c]
-            ds = ds.assign_coords(granule=p.granule)
-            ds[f"{c}_averaged_pulse_peak"] = ("granule", p.velocity, {"long_name": f"max_t <v_k(t)>, {c}", "units": "V_1"})
-            ds[f"{c}_averaged_pulse_peak_stderr"] = ("granule", p.velocity_stderr, {"units": "V_1"})
-            ds[f"{c}_averaged_pulse_peak_time"] = ("granule", p.time, {"long_name": f"argmax_t <v_k(t)>, {c}", "units": "rescaled time"})
-            ds[f"{c}_mean_peak_velocity"] = ("granule", m.value, {"long_name": f"<max_t v_k>, {c}", "units": "V_1"})
+            ds = ds.assign_coords(granule=("granule", p.granule, {"long_name": "large granule index k (1-based)", "units": "1"}))
+            ds[f"{c}_averaged_pulse_peak"] = ("granule", p.velocity, {"long_name": f"max_t <v_k(t)>, {c}", **rescaled_attrs("velocity")})
+            ds[f"{c}_averaged_pulse_peak_stderr"] = ("granule", p.velocity_stderr, rescaled_attrs("velocity"))
+            ds[f"{c}_averaged_pulse_peak_time"] = ("granule", p.time, {"long_name": f"argmax_t <v_k(t)>, {c}", **rescaled_attrs("time")})
+            ds[f"{c}_mean_peak_velocity"] = ("granule", m.value, {"long_name": f"<max_t v_k>, {c}", **rescaled_attrs("velocity")})
             for name, fit in (("k", self.fit_k[c]), ("t", self.fit_t[c])):
                 ds.attrs[f"{c}_fit_{name}_abc"] = list(fit.params)
                 ds.attrs[f"{c}_fit_{name}_abc_stderr"] = list(fit.stderr)

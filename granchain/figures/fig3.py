@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import analysis, bca
+from ..units import rescaled_attrs
 from ._style import COLORS, MARKERS, panel_pair
 
 
@@ -55,14 +56,14 @@ class Fig3Data:
     def to_dataset(self):
         import xarray as xr
 
-        ds = xr.Dataset(coords={"granule": self.granule},
+        ds = xr.Dataset(coords={"granule": ("granule", self.granule, {"long_name": "large granule index k (1-based)", "units": "1"})},
                         attrs={"figure": "paper Fig. 3", "fit_range_k": list(self.fit_range), "S_eq_slope": self.S,
                                "realizations": self.realizations, "fit": "unweighted least squares"})
-        ds["bca_mean_arrival_time"] = ("granule", self.bca_mean, {"long_name": "mean of Eq. (total-time) over the realisations", "units": "rescaled time"})
+        ds["bca_mean_arrival_time"] = ("granule", self.bca_mean, {"long_name": "mean of Eq. (total-time) over the realisations", **rescaled_attrs("time")})
         for c in self.chains:
-            ds[f"{c}_averaged_pulse_time"] = ("granule", self.pulse_time[c], {"long_name": f"argmax_t <v_k(t)>, {c}", "units": "rescaled time"})
-            ds[f"{c}_averaged_pulse_time_stderr"] = ("granule", self.pulse_time_stderr[c], {"units": "rescaled time"})
-            ds[f"{c}_mean_peak_time"] = ("granule", self.mean_time[c].value, {"long_name": f"<t_k> over realisations, {c}", "units": "rescaled time"})
+            ds[f"{c}_averaged_pulse_time"] = ("granule", self.pulse_time[c], {"long_name": f"argmax_t <v_k(t)>, {c}", **rescaled_attrs("time")})
+            ds[f"{c}_averaged_pulse_time_stderr"] = ("granule", self.pulse_time_stderr[c], rescaled_attrs("time"))
+            ds[f"{c}_mean_peak_time"] = ("granule", self.mean_time[c].value, {"long_name": f"<t_k> over realisations, {c}", **rescaled_attrs("time")})
             ds.attrs[f"{c}_fit_slope_intercept"] = list(self.fit[c].params)
             ds.attrs[f"{c}_fit_slope_intercept_stderr"] = list(self.fit[c].stderr)
             ds.attrs[f"{c}_fit_error_method"] = self.fit[c].method
