@@ -7,7 +7,7 @@
    threads). The two are measured alternately (``--repeat`` rounds, best of each) so that load
    on a shared machine hits both alike. The redesign must not cost speed: ratio now / 0.1.0.
 2. The new families at comparable sizes (51 granules, as the decorated N = 26 chain):
-   ``TaperedDecorated(26, 0.98)``, ``RandomRadii(51, U[0.5, 1])``, ``BinaryRandom(51, (1, 0.5), 0.5)``,
+   ``TaperedDecorated(26, q=0.02)``, ``RandomRadii(51, U[0.5, 1])``, ``BinaryRandom(51, (1, 0.5), 0.5)``,
    and ``CustomFamily`` (a Python function returning 51 radii), whose chains are built in Python
    one realisation at a time: its build time per realisation is printed apart.
 
@@ -111,7 +111,7 @@ def main(argv=None) -> int:
     print(f"{'family':>44s} {'chain':>18s} {'realisations/s':>15s} {'vs decorated N = 26':>20s}")
     ref, _ = new_rate(family, "decorated", args.families, args.chunk_size)
     custom = gc.CustomFamily(shrinking_radii, name="shrinking")
-    for fam in (gc.TaperedDecorated(26, 0.98), gc.RandomRadii(51, gc.Uniform(0.5, 1.0)), gc.BinaryRandom(51, (1.0, 0.5), 0.5), custom):
+    for fam in (gc.TaperedDecorated(26, q=0.02), gc.RandomRadii(51, gc.Uniform(0.5, 1.0)), gc.BinaryRandom(51, (1.0, 0.5), 0.5), custom):
         new_rate(fam, fam.chains[0], 2, 2)  # warm-up
         rate, ds = new_rate(fam, fam.chains[0], args.families, args.chunk_size)
         failed = int((ds["status"] != 0).sum())

@@ -536,8 +536,9 @@ class ZarrSink:
             if have == want:
                 continue
             if warn:
-                what = "missing" if not os.path.exists(file) else "unreadable" if have is None else "changed"
-                self._warn(f"{file} was {what}; restored it from the stored parameters")
+                what = ("missing" if not os.path.exists(file) else "unreadable" if have is None else
+                        "not what this granchain writes for the stored parameters (edited, or written by an earlier version)")
+                self._warn(f"{file} was {what}; rewrote it from the stored parameters (results untouched)")
             os.makedirs(os.path.dirname(file), exist_ok=True)
             _atomic_write(file, json.dumps(want, indent=4, sort_keys=True).encode())
         ref_group = zarr.open_group(zarr.storage.MemoryStore({k: _buf(v) for k, v in reference.items()}), mode="r",
@@ -759,6 +760,17 @@ def _check_out(path) -> str:
     return text
 
 
+def _current_family_record(record: dict) -> dict:
+    """The record today's granchain writes for the family an earlier version recorded (records whose
+    fields changed meaning, such as TaperedDecorated's q, are read in their own version's meaning)."""
+    from .families import family_from_record
+
+    try:
+        return family_from_record(record).describe()
+    except (ValueError, KeyError, TypeError):  # a CustomFamily (its function is not stored), or unknown: as stored
+        return record
+
+
 def check_same_parameters(path, stored: str | None, spec, extend: bool = False) -> int:
     """Refuse to resume a store written with other parameters, listing the differences; returns the
     stored number of realisations (with ``extend``, a store may hold fewer than asked: it is extended)."""
@@ -769,6 +781,8 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
     except ValueError:
         raise ValueError(f"{path}: its parameter record is not valid JSON; delete the store (rm -r {path}) and run again") from None
     new = json.loads(json.dumps(spec.describe(), sort_keys=True))
+    if isinstance(old.get("family"), dict):  # a record of an earlier version is compared in today's form
+        old = {**old, "family": json.loads(json.dumps(_current_family_record(old["family"]), sort_keys=True))}
     stored_r = old.get("realizations")
     if extend and isinstance(stored_r, int) and stored_r <= new["realizations"]:
         old = {**old, "realizations": new["realizations"]}

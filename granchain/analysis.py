@@ -6,7 +6,7 @@
 * :func:`histogram` - arrival-time densities with Poisson error bars, paper Fig. 4;
 * :func:`ks_normal` - the KS distance d of the standardised sample to N(0, 1), paper
   Eq. (AD), with a Monte Carlo (Lilliefors) p-value;
-* observables of an ensemble Dataset (``run_ensemble`` schema, DESIGN.md Sec. 2): the two
+* observables of an ensemble Dataset (the ``run_ensemble`` store schema): the two
   different amplitudes :func:`mean_peak_amplitude` (<max_t v_k>) and
   :func:`averaged_pulse_peak` (max_t <v_k(t)>, the paper's Fig. 2), plus
   :func:`mean_arrival_time`, :func:`arrival_times`, :func:`out_of_order_peaks`;
@@ -496,7 +496,7 @@ def _per_granule(ds, chain, name, quantity) -> PerGranule:
 
 
 def mean_peak_amplitude(ds, chain="decorated") -> PerGranule:
-    """Mean of per-realisation peaks <max_t v_k> (DESIGN.md Sec. 2).
+    """Mean of per-realisation peaks <max_t v_k> (docs: explanation/physics, the two amplitudes).
 
     Not the paper's Fig. 2 amplitude (that is :func:`averaged_pulse_peak`): it decays much
     more weakly, since it ignores realisations drifting out of phase.
@@ -593,7 +593,7 @@ def averaged_pulse_peak(ds, chain="decorated") -> PulsePeak:
 def out_of_order_peaks(ds, chain="decorated") -> PerGranule:
     """Per granule k < N: count of valid realisations with peak_time[k] > peak_time[k + 1].
 
-    A proxy for the rare genuine double peaks (DESIGN.md Sec. 2): a later, higher hump at k
+    A proxy for the rare genuine double peaks (a granule hit twice): a later, higher hump at k
     moves max_t v_k after the pulse has already reached k + 1. It misses double peaks that
     stay in order. It is the only count granchain has: the kernels record one maximum per
     granule (with the tie rule of ``peak_rtol``) and do not count separate humps. ``value`` is the count,
@@ -641,11 +641,25 @@ def compare_curves(f, g, x) -> CurveComparison:
     return CurveComparison(float(rel[i]), float(x[i]), float(np.max(diff)), pull)
 
 
-# Re-exports at the end: these modules build on the functions above.
+# The jackknife (granchain._jackknife, which needs nothing from here) is re-exported as it is. The
+# averaged-pulse fits (granchain._pulsefits) build on the functions above, so they are offered
+# here lazily (PEP 562 module __getattr__): importing this module does not import them, and the
+# package's import graph has no cycle (tests/test_imports.py).
 from ._jackknife import (  # noqa: E402
     ChunkSums, Jackknife, block_jackknife, block_labels, chunk_jackknife, jackknife_stderr,
 )
-from ._pulsefits import (  # noqa: E402
-    CurveAgreement, PulseFit, averaged_peak_gap, fit_averaged_arrival, fit_averaged_decay,
-    paper_curve_agreement, pulse_jackknife, pulse_means, rounding_envelope,
-)
+
+_PULSEFITS = ("CurveAgreement", "PulseFit", "averaged_peak_gap", "fit_averaged_arrival", "fit_averaged_decay",
+              "paper_curve_agreement", "pulse_jackknife", "pulse_means", "rounding_envelope")
+
+
+def __getattr__(name):
+    if name in _PULSEFITS:
+        from . import _pulsefits
+
+        return getattr(_pulsefits, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_PULSEFITS))

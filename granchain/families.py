@@ -389,20 +389,39 @@ class RandomDecorated(_Decorated):
         return 1.0
 
 
-@dataclass(frozen=True)
+#: How a TaperedDecorated record says which q it holds (records of granchain <= 0.4 held the ratio).
+_TAPER = "(1 - q)^(k-1)"
+
+
+def _q_of_ratio(ratio: float) -> float:
+    """q = 1 - ratio as the number a person would write (0.1 for the ratio 0.9, not 0.09999999999999998),
+    provided 1 - q gives the ratio back bitwise, so the chain is the one the ratio built; else 1 - ratio."""
+    q = float(f"{1.0 - ratio:.15g}")
+    return q if 1.0 - q == ratio else 1.0 - ratio
+
+
+@dataclass(frozen=True, init=False)
 class TaperedDecorated(_Decorated):
-    """A tapered decorated chain: large radii q^(k-1), k = 1..N (geometric taper by the factor q per
-    large granule: q < 1 shrinks, q > 1 grows, q = 1 is :class:`RandomDecorated` bitwise), and in
-    gap j a small granule of radius X_j min(q^(j-1), q^j), X_j i.i.d. from ``distribution``: the
-    distribution is that of the ratio of the small radius to its smaller neighbour, the ratio that
-    decides the effective description's validity.
+    """A tapered decorated chain: large radii (1 - q)^(k-1), k = 1..N, the convention of
+    :func:`granchain.tapered` and of the tapered-chain literature (each large granule a fraction q
+    smaller than the one before; Sen, Manciu and Wright, Phys. Rev. E 57, 2386 (1998)): q = 0 is
+    :class:`RandomDecorated` bitwise, q > 0 shrinks, q < 0 grows. In gap j a small granule of radius
+    X_j min(R_j, R_{j+1}), X_j i.i.d. from ``distribution``: the distribution is that of the ratio of
+    the small radius to its smaller neighbour, the ratio that decides the effective description's
+    validity.
 
     The effective chain uses Eq. (renorm-mass) with the local large masses and the two-contacts-in-
     series interaction for unequal neighbours (:func:`granchain.effective_parameters`).
+
+    ``q`` is keyword-only. Up to granchain 0.4 the second argument was the ratio of successive
+    large radii (radii ratio^(k-1), untapered at 1); a positional second argument, or ``ratio=``,
+    is still read that way, with a DeprecationWarning, so that old code never silently builds
+    another chain: ``TaperedDecorated(26, 0.95)`` is ``TaperedDecorated(26, q=0.05)``. Stores
+    written by those versions record the ratio and are read as such.
     """
 
     n_large: int = 26
-    q: float = 0.95
+    q: float = 0.05
     distribution: object = None
     n: float = HERTZ
     momentum_conserving: bool = False
@@ -410,20 +429,50 @@ class TaperedDecorated(_Decorated):
 
     kind: ClassVar[str] = "tapered-decorated"
 
+    def __init__(self, n_large: int = 26, *args, q: float | None = None, distribution=None, n: float = HERTZ,
+                 momentum_conserving: bool = False, wall: bool = False, ratio: float | None = None):
+        if len(args) > 5:
+            raise TypeError(f"TaperedDecorated takes at most 6 positional arguments, got {1 + len(args)}")
+        if args:  # the signature of granchain <= 0.4: (n_large, ratio, distribution, n, momentum_conserving, wall)
+            old = dict(zip(("ratio", "distribution", "n", "momentum_conserving", "wall"), args))
+            if "distribution" in old and distribution is not None:
+                raise TypeError("TaperedDecorated got the distribution both by position and by keyword")
+            ratio = old.pop("ratio") if ratio is None else ratio
+            distribution = old.pop("distribution", distribution)
+            n, momentum_conserving, wall = old.get("n", n), old.get("momentum_conserving", momentum_conserving), old.get("wall", wall)
+        if ratio is not None:
+            if q is not None:
+                raise ValueError("give q (large radii (1 - q)^(k-1)) or the deprecated ratio (radii ratio^(k-1)), not both")
+            ratio = finite_scalar("ratio", ratio, positive=True)
+            warnings.warn(f"TaperedDecorated's second argument is now q, the fraction by which each large radius "
+                          f"shrinks (radii (1 - q)^(k-1), as in granchain.tapered); the ratio {ratio:g} you passed "
+                          f"is read as q = 1 - {ratio:g}. Write TaperedDecorated({n_large}, q={1.0 - ratio:.6g}, ...)",
+                          DeprecationWarning, stacklevel=2)
+            q = _q_of_ratio(ratio)
+        for name, value in (("n_large", n_large), ("q", 0.05 if q is None else q), ("distribution", distribution), ("n", n),
+                            ("momentum_conserving", momentum_conserving), ("wall", wall)):
+            object.__setattr__(self, name, value)
+        self.__post_init__()
+
     def __post_init__(self):
-        q = finite_scalar("q", self.q, positive=True)
+        q = finite_scalar("q", self.q)
+        if not q < 1.0:
+            raise ValueError(f"q = {q:g} must be < 1: the large radii are (1 - q)^(k-1) (q = 0 untapered, q > 0 shrinking, "
+                             "q < 0 growing; before granchain 0.5 this argument was the ratio 1 - q)")
         object.__setattr__(self, "q", q)
-        self._validate(stacklevel=3)
-        if q ** (self.n_large - 1) < 1e-3 or q ** (self.n_large - 1) > 1e3:
-            raise ValueError(f"q = {q:g} over {self.n_large} large granules spans radii {q ** (self.n_large - 1):.3g}..1: "
-                             "choose q closer to 1 (radii within a factor 1000)")
+        self._validate(stacklevel=4)
+        span = (1.0 - q) ** (self.n_large - 1)
+        if span < 1e-3 or span > 1e3:
+            raise ValueError(f"q = {q:g} over {self.n_large} large granules spans radii {span:.3g}..1: choose q closer to 0 "
+                             "(radii within a factor 1000; before granchain 0.5 this argument was the ratio 1 - q)")
 
     def large_radii(self) -> np.ndarray:
-        return self.q ** np.arange(self.n_large, dtype=float)
+        return (1.0 - self.q) ** np.arange(self.n_large, dtype=float)
 
     def describe(self) -> dict:
-        return self._walled({"family": self.kind, "n_large": self.n_large, "q": self.q, "distribution": self.distribution.describe(),
-                             "n": self.n, "momentum_conserving": self.momentum_conserving})
+        return self._walled({"family": self.kind, "n_large": self.n_large, "q": self.q, "large_radii": _TAPER,
+                             "distribution": self.distribution.describe(), "n": self.n,
+                             "momentum_conserving": self.momentum_conserving})
 
     def label(self) -> str:
         return f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}{self._wall_label()}"
@@ -700,7 +749,9 @@ def family_from_record(record: dict) -> ChainFamily:
             return RandomDecorated(record["n_large"], distribution_from_record(record["distribution"]), n=record["n"],
                                    momentum_conserving=record["momentum_conserving"], wall=wall)
         if kind == TaperedDecorated.kind:
-            return TaperedDecorated(record["n_large"], record["q"], distribution_from_record(record["distribution"]),
+            # records of granchain <= 0.4 hold the ratio of successive large radii under "q"
+            q = record["q"] if record.get("large_radii") == _TAPER else _q_of_ratio(record["q"])
+            return TaperedDecorated(record["n_large"], q=q, distribution=distribution_from_record(record["distribution"]),
                                     n=record["n"], momentum_conserving=record["momentum_conserving"], wall=wall)
         if kind == RandomRadii.kind:
             return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"], wall=wall)

@@ -316,7 +316,7 @@ def test_within_validity_is_silent(make):
 
 @pytest.mark.parametrize(
     "make",
-    [lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.6)), lambda: gc.TaperedDecorated(6, 0.9, gc.Truncated(st.beta(2, 5))),
+    [lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.6)), lambda: gc.TaperedDecorated(6, q=0.1, distribution=gc.Truncated(st.beta(2, 5))),
      lambda: gc.effective(gc.decorated([0.5, 0.2])), lambda: gc.random_decorated(6, gc.Uniform(0.01, 0.6)),
      lambda: gc.run_ensemble(3, gc.Uniform(0.3, 0.5), realizations=1, chains="effective", progress=False)],
     ids=["RandomDecorated", "TaperedDecorated", "effective", "random_decorated", "run_ensemble"],

@@ -22,6 +22,7 @@ import xarray as xr
 
 import granchain as gc
 from granchain import _ensemble as ens
+from granchain._store import StoreRepairWarning
 from granchain.cli import main as cli_main
 
 DATA = Path(__file__).parent / "data"
@@ -42,7 +43,7 @@ def tapered_chain(rng):
 
 FAMILIES = {
     "decorated": lambda: gc.RandomDecorated(6),
-    "tapered-decorated": lambda: gc.TaperedDecorated(6, 0.9, gc.Uniform(0.05, 0.35)),
+    "tapered-decorated": lambda: gc.TaperedDecorated(6, q=0.1, distribution=gc.Uniform(0.05, 0.35)),
     "polydisperse": lambda: gc.RandomRadii(8, gc.Uniform(0.5, 1.0)),
     "binary": lambda: gc.BinaryRandom(8, (1.0, 0.6), 0.4),
     "custom-radii": lambda: gc.CustomFamily(radii_of_random_length, name="shrinking"),
@@ -204,18 +205,54 @@ def test_binary_radii_matter():
     assert np.ptp(ds["peak_velocity"].values[0, :, -2]) > 1e-2
 
 
-def test_tapered_decorated_with_q_one_is_random_decorated(reference):
-    ds = _run(gc.TaperedDecorated(6, 1.0, gc.Uniform(0.01, 0.4)))
+def test_tapered_decorated_with_q_zero_is_random_decorated(reference):
+    ds = _run(gc.TaperedDecorated(6, q=0.0, distribution=gc.Uniform(0.01, 0.4)))
     assert_same_results(ds, reference["decorated"], PER_REALISATION + ("mean_velocity", "small_radius"))
-    # a taper does change the pulse (q < 1: lighter granules ahead, the pulse speeds up)
-    tapered = _run(gc.TaperedDecorated(6, 0.8, gc.Uniform(0.01, 0.4)), chains="decorated")
+    # a taper does change the pulse (q > 0: lighter granules ahead, the pulse speeds up)
+    tapered = _run(gc.TaperedDecorated(6, q=0.2, distribution=gc.Uniform(0.01, 0.4)), chains="decorated")
     assert np.all(tapered["peak_time"].values[0, :, -2] < reference["decorated"]["peak_time"].values[0, :, -2])
+
+
+@pytest.mark.parametrize("q", [0.0, 0.05, 0.1, 0.3, -0.05])
+def test_one_meaning_of_q_for_tapered_and_tapered_decorated(q):
+    """TaperedDecorated's large radii are tapered()'s radii for the same q: (1 - q)^(k-1)."""
+    fam = gc.TaperedDecorated(8, q=q, distribution=gc.Uniform(0.01, 0.4))
+    np.testing.assert_array_equal(fam.large_radii(), gc.tapered(8, q).radii)
+    np.testing.assert_allclose(fam.large_radii(), (1 - q) ** np.arange(8), rtol=1e-15)
+
+
+@pytest.mark.parametrize("ratio", [0.95, 0.9, 0.98, 1.02])
+def test_the_old_ratio_still_builds_the_same_chain_with_a_warning(ratio):
+    """granchain <= 0.4 took the ratio of successive large radii as the second argument: positional
+    or ratio=, it still builds the chain it built (bitwise), and says how to write it now."""
+    new = gc.TaperedDecorated(8, q=round(1 - ratio, 12), distribution=gc.Uniform(0.01, 0.4))  # q as one writes it
+    for make in (lambda: gc.TaperedDecorated(8, ratio, gc.Uniform(0.01, 0.4)),
+                 lambda: gc.TaperedDecorated(8, ratio=ratio, distribution=gc.Uniform(0.01, 0.4))):
+        with pytest.warns(DeprecationWarning, match=r"is now q, the fraction .* read as q = 1 - "):
+            old = make()
+        np.testing.assert_array_equal(old.large_radii(), ratio ** np.arange(8.0))  # what 0.4 built
+        assert old == new
+    with pytest.raises(ValueError, match="not both"):
+        gc.TaperedDecorated(8, q=0.1, ratio=0.9)
+
+
+def test_a_record_written_by_0_4_rebuilds_its_chains():
+    """Stores of granchain <= 0.4 record the ratio under "q": they are read as the ratio, so a
+    resumed or re-analysed old store has its own chains."""
+    old_record = {"family": "tapered-decorated", "n_large": 6, "q": 0.9, "n": 2.5, "momentum_conserving": False,
+                  "distribution": gc.Uniform(0.05, 0.35).describe()}
+    fam = gc.family_from_record(old_record)
+    np.testing.assert_array_equal(fam.large_radii(), 0.9 ** np.arange(6.0))
+    assert fam.q == 0.1  # as one writes it, and 1 - 0.1 is the stored ratio 0.9 bitwise
+    rec = fam.describe()
+    assert rec["large_radii"] == "(1 - q)^(k-1)" and gc.family_from_record(rec) == fam
+    assert fam == gc.TaperedDecorated(6, q=0.1, distribution=gc.Uniform(0.05, 0.35))
 
 
 def test_tapered_decorated_effective_chain_follows_the_decorated_one():
     """Effective description of a tapered decorated chain (two contacts in series for unequal
     neighbours): arrival times within 2 % of the decorated chain's."""
-    ds = _run(gc.TaperedDecorated(8, 0.9, gc.Uniform(0.01, 0.3)), realizations=10)
+    ds = _run(gc.TaperedDecorated(8, q=0.1, distribution=gc.Uniform(0.01, 0.3)), realizations=10)
     t = ds["peak_time"].isel(granule=slice(1, -1)).mean("realization")
     rel = np.abs(t.sel(chain="effective") - t.sel(chain="decorated")) / t.sel(chain="decorated")
     assert float(rel.max()) < 0.02, rel.values
@@ -328,8 +365,8 @@ def test_custom_family_refuses_realisations_of_another_size():
         (lambda: gc.BinaryRandom(5, (1.0, -0.5)), "radii"),
         (lambda: gc.BinaryRandom(5, (1.0,)), "radii"),
         (lambda: gc.BinaryRandom(5, p=1.5), "p"),
-        (lambda: gc.TaperedDecorated(6, 0.0), "q"),
-        (lambda: gc.TaperedDecorated(60, 0.5), "q"),
+        (lambda: gc.TaperedDecorated(6, q=1.0), "q"),
+        (lambda: gc.TaperedDecorated(60, q=0.5), "q"),
         (lambda: gc.RandomDecorated(1), "n_large"),
         (lambda: gc.RandomDecorated(5, n=1.0), "n"),
         (lambda: gc.CustomFamily("radii"), "function"),
@@ -365,8 +402,8 @@ def test_cli_help_lists_families_and_integrators(capsys):
          gc.RandomRadii(6, gc.Uniform(0.7, 1.0)), None),
         (["--family", "binary", "--size", "6", "--radii", "1,0.7", "--p", "0.3", "--integrator", "verlet", "--step", "2e-3"],
          gc.BinaryRandom(6, (1.0, 0.7), 0.3), gc.Verlet(2e-3)),
-        (["--family", "tapered-decorated", "--large", "4", "--q", "0.9", "--chain", "effective"],
-         gc.TaperedDecorated(4, 0.9), None),
+        (["--family", "tapered-decorated", "--large", "4", "--q", "0.1", "--chain", "effective"],
+         gc.TaperedDecorated(4, q=0.1), None),
     ],
 )
 def test_cli_families_write_the_api_result(tmp_path, capsys, args, family, integrator):
@@ -453,3 +490,33 @@ def test_aligned_pulse_in_a_store_is_checked_and_repaired(tmp_path):
     np.testing.assert_array_equal(xr.open_dataset(store, engine="zarr")["aligned_velocity"].values,
                                   memory["aligned_velocity"].values)
     shutil.rmtree(store)
+
+
+def test_a_tapered_store_written_by_0_4_resumes(tmp_path):
+    """A store whose records hold the 0.4 ratio under "q" resumes with the family of today's q, and
+    the resumed run's results are those of a fresh run (nothing recomputed differently)."""
+    import json
+
+    import zarr
+
+    fam = gc.TaperedDecorated(5, q=0.1, distribution=gc.Uniform(0.05, 0.35))
+    path = tmp_path / "old.zarr"
+    kw = dict(realizations=6, chunk_size=3, seed=2, progress=False, threads=1)
+    gc.run_ensemble(fam, out=path, **kw)
+    root = zarr.open_group(str(path), mode="r+")
+    for group in (root, root["progress"]):  # the store keeps a copy of its parameters with its progress
+        for key in ("granchain_parameters", "granchain_family"):
+            if key not in group.attrs:
+                continue
+            record = json.loads(group.attrs[key])
+            rec = record["family"] if key == "granchain_parameters" else record
+            rec["q"] = 1 - rec.pop("q")  # what 0.4 wrote: the ratio of successive large radii
+            del rec["large_radii"]
+            group.attrs[key] = json.dumps(record, sort_keys=True)
+    assert json.loads(root.attrs["granchain_family"])["q"] == 0.9
+    with pytest.warns(StoreRepairWarning, match="written by an earlier version"):  # its metadata brought up to date
+        reopened = gc.run_ensemble(fam, out=path, **kw)  # resumes: every chunk is done, nothing recomputed
+    assert json.loads(xr.open_zarr(path, consolidated=False).attrs["granchain_family"])["q"] == 0.1
+    fresh = gc.run_ensemble(fam, **kw)
+    np.testing.assert_array_equal(reopened["peak_time"].values, fresh["peak_time"].values)
+    assert gc.family_from_dataset(xr.open_zarr(path, consolidated=False)) == fam

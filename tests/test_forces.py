@@ -118,7 +118,7 @@ def test_verlet_peak_forces_converge_at_order_two():
 # -- 4. ensembles --------------------------------------------------------------------------------
 FAMILIES = {
     "decorated": lambda: gc.RandomDecorated(5),
-    "tapered": lambda: gc.TaperedDecorated(5, 0.9, gc.Uniform(0.05, 0.35)),
+    "tapered": lambda: gc.TaperedDecorated(5, q=0.1, distribution=gc.Uniform(0.05, 0.35)),
     "polydisperse": lambda: gc.RandomRadii(6, gc.Uniform(0.5, 1.0)),
     "binary-wall": lambda: gc.BinaryRandom(6, (1.0, 0.6), 0.4, wall=True),
     "decorated-wall": lambda: gc.RandomDecorated(5, wall=True),

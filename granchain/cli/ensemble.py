@@ -9,7 +9,7 @@ import sys
 FAMILY_HELP = {
     "decorated": "the paper's chain: N large granules (R = 1), small radii U[alpha, beta] between them "
                  "(--large, --alpha, --beta; --chain decorated/effective/both)",
-    "tapered-decorated": "large radii q^(k-1), small radius = U[alpha, beta] x its smaller neighbour "
+    "tapered-decorated": "large radii (1 - q)^(k-1), small radius = U[alpha, beta] x its smaller neighbour "
                          "(--large, --q, --alpha, --beta; --chain decorated/effective/both)",
     "polydisperse": "every radius i.i.d. U[alpha, beta], all granules observed (--size, --alpha, --beta)",
     "binary": "two species in random order, species b with probability p (--size, --radii RA,RB, --p)",
@@ -20,6 +20,7 @@ DEFAULT_INTERVAL = {"decorated": (0.01, 0.4), "tapered-decorated": (0.01, 0.4), 
 
 def add_parser(subparsers) -> None:
     from .._integrators import INTEGRATORS
+    from .pulse import taking
 
     families = "\n".join(f"  {name:<18} {text}" for name, text in FAMILY_HELP.items())
     integrators = "\n".join(f"  {name:<18} {(cls.__doc__ or '').strip().splitlines()[0]}" for name, cls in INTEGRATORS.items())
@@ -41,7 +42,8 @@ def add_parser(subparsers) -> None:
     fam.add_argument("--size", type=int, default=26, help="polydisperse, binary: granules per chain (default 26)")
     fam.add_argument("--alpha", type=float, default=None, help="smallest radius of the uniform distribution (default 0.01; polydisperse 0.5)")
     fam.add_argument("--beta", type=float, default=None, help="largest radius of the uniform distribution (default 0.4; polydisperse 1.0)")
-    fam.add_argument("--q", type=float, default=0.95, help="tapered-decorated: ratio of successive large radii (default 0.95)")
+    fam.add_argument("--q", type=float, default=0.05, help="tapered-decorated: fraction by which each large radius shrinks, radii (1 - q)^(k-1) as in granchain.tapered "
+                          "(default 0.05; 0 untapered, < 0 growing; before 0.5 this option was the ratio 1 - q)")
     fam.add_argument("--radii", default="1,0.5", metavar="RA,RB", help="binary: radii of species a and b (default 1,0.5)")
     fam.add_argument("--p", type=float, default=0.5, help="binary: probability of species b (default 0.5)")
     fam.add_argument("--n", type=float, default=2.5, help="contact exponent (default 2.5, Hertz)")
@@ -62,11 +64,11 @@ def add_parser(subparsers) -> None:
     integ.add_argument("--atol", type=float, default=None,
                        help="absolute tolerance (defaults: decorated chains rkn4 1e-8, dp5 1e-9; the others 5e-11; dop853)")
     integ.add_argument("--error-control", choices=("relaxed", "windowed", "exact"), default="relaxed",
-                       help="dp5 and rkn4 only. relaxed (default): looser tolerance for the granules the pulse has passed; "
+                       help=f"{' and '.join(taking('relaxed_lag'))} only. relaxed (default): looser tolerance for the granules the pulse has passed; "
                             "windowed: also drop them from the integration a few granules behind the pulse (cost linear "
                             "in N; peaks as accurate, the averaged pulse's tail not kept); exact: every granule to the end "
                             "at full tolerance (--integrator dp5 --rtol 1e-6 --atol 1e-9: granchain < 0.3)")
-    integ.add_argument("--step", type=float, default=None, help="time step (verlet; default 1e-3)")
+    integ.add_argument("--step", type=float, default=None, help=f"time step ({', '.join(taking('dt'))}; default 1e-3)")
     p.add_argument("--chunk-size", type=int, default=500, help="realisations per chunk, the unit of saving (default 500)")
     p.add_argument("--t-end", type=float, default=None, help="end of the time grid of the averaged pulse (default: past the pulse's exit)")
     p.add_argument("--dt", type=float, default=0.1, help="spacing of the time grid of the averaged pulse (default 0.1)")
@@ -139,7 +141,7 @@ def build_family(args):
     if args.family == "polydisperse":
         return RandomRadii(args.size, dist, n=args.n, wall=args.wall)
     if args.family == "tapered-decorated":
-        return TaperedDecorated(args.large, args.q, dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall)
+        return TaperedDecorated(args.large, q=args.q, distribution=dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall)
     return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall)
 
 

@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 
+from .._integrators import INTEGRATORS
 from ._units import add_unit_arguments, scale_from_args
 
 
@@ -18,6 +19,18 @@ def _floats(text: str, flag: str = "--radii") -> list[float]:
         return [float(s) for s in fields]
     except ValueError:
         raise ValueError(f"{flag} expects comma-separated numbers, got {text!r}") from None
+
+
+#: What a user should know when choosing (every registered integrator is listed, noted or not).
+INTEGRATOR_NOTES = {"dp5": "default, adaptive Dormand-Prince 5(4)", "rkn4": "adaptive Runge-Kutta-Nystrom 4(3)",
+                    "verlet": "fixed step", "dop853": "SciPy's DOP853, the independent reference; slow"}
+
+
+def taking(setting: str) -> list[str]:
+    """The registered integrators that have ``setting`` (a field of their dataclass)."""
+    import dataclasses
+
+    return [name for name, cls in sorted(INTEGRATORS.items()) if setting in {f.name for f in dataclasses.fields(cls)}]
 
 
 def add_parser(subparsers) -> None:
@@ -41,10 +54,12 @@ def add_parser(subparsers) -> None:
         'also print the peak force of every contact j (between granules j and j+1) and its time '
         '(--json: "peak_force", "peak_force_time"); printed anyway, in N and s too, with physical units'))
     p.add_argument("--n", type=float, default=2.5, help="exponent of the contact potential (default: Hertz, 2.5)")
-    p.add_argument("--integrator", default="dp5", help="dp5 (default), verlet or dop853 (SciPy reference)")
-    p.add_argument("--rtol", type=float, help="relative tolerance (dp5, dop853)")
-    p.add_argument("--atol", type=float, help="absolute tolerance (dp5, dop853)")
-    p.add_argument("--dt", type=float, help="time step (verlet)")
+    # the lists of integrators and of the ones each setting applies to come from the registry
+    p.add_argument("--integrator", default="dp5", metavar="{" + ",".join(sorted(INTEGRATORS)) + "}",
+                   help=f"one of {', '.join(f'{name} ({INTEGRATOR_NOTES[name]})' if name in INTEGRATOR_NOTES else name for name in sorted(INTEGRATORS))}")
+    p.add_argument("--rtol", type=float, help=f"relative tolerance ({', '.join(taking('rtol'))})")
+    p.add_argument("--atol", type=float, help=f"absolute tolerance ({', '.join(taking('atol'))})")
+    p.add_argument("--dt", type=float, help=f"time step ({', '.join(taking('dt'))})")
     p.add_argument("--json", action="store_true", help=(
         'print {"granule": [...], "peak_velocity": [...], "peak_time": [...]} only (rescaled); with --wall also "wall": '
         '{"peak_force", "peak_force_time", "impulse"}; with physical units also "physical": {"peak_velocity_m_s", '

@@ -1,0 +1,111 @@
+"""granchain's modules import each other without a cycle.
+
+A cycle makes the result of an import depend on which module is imported first (a name used at
+module level may not exist yet). The graph is read from the source with ``ast``: module-level
+imports only; imports inside functions are deliberate lazy imports (pint, matplotlib, the
+averaged-pulse fits offered by ``granchain.analysis``) and run after every module has loaded.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "granchain"
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def resolve(module: str, is_package: bool, level: int, target: str | None) -> str:
+    base = module.split(".") if is_package else module.split(".")[:-1]
+    if level > 1:
+        base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([target] if target else []))
+
+
+def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
+    """{module: modules of the package it imports at module level}."""
+    files = {module_name(p): p for p in package.rglob("*.py")}
+    graph = {name: set() for name in files}
+    for name, path in files.items():
+        is_package = path.name == "__init__.py"
+        for node in ast.parse(path.read_text()).body:  # module level only, no function bodies
+            nodes = [node]
+            if isinstance(node, (ast.If, ast.Try)):  # `if TYPE_CHECKING:` / try-imports at module level
+                nodes = [n for n in ast.walk(node) if isinstance(n, (ast.Import, ast.ImportFrom))]
+            for n in nodes:
+                if isinstance(n, ast.Import):
+                    targets = [a.name for a in n.names]
+                elif isinstance(n, ast.ImportFrom):
+                    base = resolve(name, is_package, n.level, n.module) if n.level else (n.module or "")
+                    # `from . import x` may name a submodule
+                    targets = [base] + [f"{base}.{a.name}" for a in n.names]
+                else:
+                    continue
+                # a module's own parent packages are already being imported when it runs: not an edge
+                ancestors = {".".join(name.split(".")[:i]) for i in range(1, name.count(".") + 1)}
+                graph[name] |= {t for t in targets if t in files and t != name and t not in ancestors}
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of ``graph`` as a list of nodes (first == last), or None."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node):
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def test_the_cycle_finder_finds_cycles():
+    """Negative control: a known cycle (the one analysis and _pulsefits once had) is found."""
+    assert find_cycle({"a": {"b"}, "b": {"a"}}) == ["a", "b", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b", "c"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_the_graph_sees_relative_imports():
+    graph = import_graph()
+    assert "granchain._pulsefits" in graph and "granchain.analysis" in graph["granchain._pulsefits"]
+    assert "granchain._jackknife" in graph["granchain.analysis"]
+
+
+def test_granchain_imports_have_no_cycle():
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+@pytest.mark.parametrize("name", ["fit_averaged_decay", "PulseFit", "paper_curve_agreement", "ChunkSums"])
+def test_analysis_still_offers_the_fits(name):
+    import granchain._pulsefits as pulsefits
+    import granchain.analysis as analysis
+
+    assert name in analysis.__all__ and name in dir(analysis)
+    assert getattr(analysis, name) is getattr(pulsefits, name, getattr(analysis, name))
+    with pytest.raises(AttributeError, match="no attribute 'no_such_fit'"):
+        analysis.no_such_fit  # noqa: B018
