@@ -156,6 +156,8 @@ def si_value(value, kind: str, name: str = "value", *, unit: str | None = None) 
     target = DIMENSIONS.get(kind, "") if unit is None else unit
     if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
         return float(value)
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf":
+        return float(value)
     if not (isinstance(value, str) or _is_quantity(value)):
         raise ValueError(f"{name} must be a number (SI: {target or 'dimensionless'}), a pint.Quantity or a string "
                          f"such as '5 mm', got {type(value).__name__}")

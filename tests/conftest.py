@@ -30,6 +30,18 @@ settings.register_profile(
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
 
+@pytest.fixture
+def private_theory_cache(tmp_path, monkeypatch):
+    """granchain.theory's tables in a directory of the test's own: a test neither uses nor fills the
+    user's cache (and starts with an empty memory cache)."""
+    from granchain import theory
+
+    monkeypatch.setenv("GRANCHAIN_CACHE", str(tmp_path / "cache"))
+    theory.clear_cache()
+    yield
+    theory.clear_cache()
+
+
 @pytest.fixture(scope="session")
 def reference():
     """The accuracy contract's reference integrator: SciPy DOP853 at rtol 1e-10, atol 1e-12."""

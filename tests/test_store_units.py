@@ -134,13 +134,10 @@ def test_stores_from_before_the_attribute_still_convert():
         np.testing.assert_allclose(phys["small_radius_si"].values, ds["small_radius"].values * s.radius)
 
 
-def test_theory_and_validity_datasets_parse(tmp_path, monkeypatch):
+def test_theory_and_validity_datasets_parse(tmp_path, private_theory_cache):
     from granchain import theory, validity
 
-    monkeypatch.setenv("GRANCHAIN_CACHE", str(tmp_path / "cache"))
-    theory.clear_cache()
     pred = theory.predict(gc.Uniform(0.01, 0.4), 6, memory=2, nodes=3, samples=500, profile_windows=50)
-    theory.clear_cache()
     assert_units_parse(pred, "theory")
     assert pred["arrival_time_mean"].attrs["rescaled_quantity"] == "time"
     assert pred["mean_peak_velocity"].attrs["rescaled_quantity"] == "velocity"

@@ -19,12 +19,7 @@ SMALL = dict(memory=2, lookahead=1, nodes=3, samples=2000, profile_windows=200)
 PAPER = gc.Uniform(0.01, 0.4)
 
 
-@pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("GRANCHAIN_CACHE", str(tmp_path / "cache"))
-    theory.clear_cache()
-    yield
-    theory.clear_cache()
+pytestmark = pytest.mark.usefixtures("private_theory_cache")  # conftest.py
 
 
 def narrow(R=0.2):

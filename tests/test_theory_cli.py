@@ -20,12 +20,7 @@ from granchain.cli import main
 FAST = ("--memory", "2", "--nodes", "3", "--samples", "2000")
 
 
-@pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("GRANCHAIN_CACHE", str(tmp_path / "cache"))
-    theory.clear_cache()
-    yield
-    theory.clear_cache()
+pytestmark = pytest.mark.usefixtures("private_theory_cache")  # conftest.py
 
 
 def run_cli(capsys, *argv):
