@@ -73,7 +73,7 @@ also takes a ``pint.Quantity`` or a string pint parses (``"200 GPa"``, ``"7.85 g
 scientific Python ecosystem's unit library (pint-xarray, MetPy and cf-xarray speak it), so
 quantities pass between granchain and the user's own code without conversions by hand; it is
 imported only when a quantity is parsed, so a run without units does not pay its ~0.2 s
-import. The quantities use pint's application registry (:func:`pint.get_application_registry`),
+import. The quantities use pint's application registry (``pint.get_application_registry()``),
 the one ``pint.Quantity`` itself uses, so a user's quantities convert without mixing registries.
 """
 
@@ -124,7 +124,7 @@ _WORDS = {"length": "a length", "radius": "a length", "speed": "a speed", "veloc
 
 
 def registry():
-    """pint's application registry, the one :class:`pint.Quantity` uses (imported on first call)."""
+    """pint's application registry, the one ``pint.Quantity`` uses (imported on first call)."""
     import pint
 
     return pint.get_application_registry()

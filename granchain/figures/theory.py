@@ -10,6 +10,7 @@ max_t <v_k(t)> over k = 4..N-1, so the theory's a, b, c sit next to the paper's.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,11 +50,13 @@ def _measured(measured, distribution, n_large):
 
         if REFERENCE.exists() and distribution == Uniform(0.01, 0.4) and n_large == 26:
             ref = xr.open_dataset(REFERENCE).load()
+            found = re.search(r"realizations=(\d+)", ref.attrs["source"])  # the legend names the size, not the call
+            size = f", {found.group(1)} realisations" if found else ""
             return {name: (ref[name].values, ref[f"{name}_stderr"].values) for name in
-                    ("mean_peak_velocity", "averaged_peak_velocity", "arrival_time_std")} | {"source": ref.attrs["source"]}
+                    ("mean_peak_velocity", "averaged_peak_velocity", "arrival_time_std")} | {"source": f"granchain ensemble{size}"}
         return None
     if isinstance(measured, (str, Path)):
-        return _from_dataset(xr.open_zarr(measured, consolidated=False), f"store {measured}")
+        return _from_dataset(xr.open_zarr(measured, consolidated=False), f"store {Path(measured).name}")
     return _from_dataset(measured, "ensemble")
 
 
