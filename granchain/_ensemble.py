@@ -25,7 +25,7 @@ from ._integrators import DP5, RKN4, Integrator, RunControls, get_integrator
 from ._simulate import time_limit
 from ._store import MemorySink, ZarrSink
 from ._validate import count
-from ._version import __version__
+from ._version import RESULTS_VERSION
 from .families import ChainFamily, RandomDecorated
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
@@ -176,7 +176,7 @@ class EnsembleSpec:
             "exit_margin": self.controls.exit_margin,
             "peak_rtol": self.controls.peak_rtol,
             "max_steps": self.controls.max_steps,
-            "granchain_version": __version__,
+            "results_version": RESULTS_VERSION,  # not the package version: an upgrade that computes the same numbers resumes
         }
         if self.lags is not None:  # only then: stores without the aligned pulse keep their 0.1/0.2 record
             record["lags"] = {"start": float(self.lags[0]), "stop": float(self.lags[-1]), "size": int(self.lags.size),

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._status import NOT_COMPUTED, Status, describe_codes
-from ._version import __version__
+from ._version import RESULTS_OF_VERSION, __version__
 from .units import RESCALED, rescaled_attrs
 
 __all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "MemorySink",
@@ -519,6 +519,7 @@ class ZarrSink:
         reference, coords = _reference_metadata(spec)
         stored_root = _read_json(os.path.join(self.path, ".zattrs")) or {}
         stored_progress = _read_json(os.path.join(self.path, "progress", ".zattrs")) or {}
+        rewritten = []
         for key, raw in sorted(reference.items()):
             if not key.endswith((".zgroup", ".zattrs", ".zarray")):
                 continue
@@ -535,12 +536,15 @@ class ZarrSink:
             have = _read_json(file)
             if have == want:
                 continue
-            if warn:
-                what = ("missing" if not os.path.exists(file) else "unreadable" if have is None else
-                        "not what this granchain writes for the stored parameters (edited, or written by an earlier version)")
-                self._warn(f"{file} was {what}; rewrote it from the stored parameters (results untouched)")
+            rewritten.append(f"{key} ({'missing' if not os.path.exists(file) else 'unreadable' if have is None else 'changed'})")
             os.makedirs(os.path.dirname(file), exist_ok=True)
             _atomic_write(file, json.dumps(want, indent=4, sort_keys=True).encode())
+        if warn and rewritten:  # one warning: an upgrade from an earlier version rewrites many files at once
+            written_by = stored_root.get("granchain_version") or stored_progress.get("granchain_version")
+            by = f"written by granchain {written_by}; " if written_by and written_by != __version__ else ""
+            self._warn(f"{self.path}: {len(rewritten)} metadata file(s) were missing, unreadable, edited, or in an earlier "
+                       f"version's form ({by}units, descriptions and records change between versions); rewrote them from "
+                       f"the stored parameters, results untouched: {', '.join(rewritten)}")
         ref_group = zarr.open_group(zarr.storage.MemoryStore({k: _buf(v) for k, v in reference.items()}), mode="r",
                                     zarr_format=2, use_consolidated=False)
         disk = zarr.open_group(self.path, mode="r+", zarr_format=2, use_consolidated=False)
@@ -771,6 +775,20 @@ def _current_family_record(record: dict) -> dict:
         return record
 
 
+def current_record(record: dict) -> dict:
+    """A stored parameter record in the form this version writes, so that a store of an earlier
+    granchain that computed the same numbers compares equal: the package version it names becomes
+    its results version (:data:`granchain._version.RESULTS_OF_VERSION`; an unknown version is left
+    as it is, and the comparison then refuses it), and the family record is today's (fields whose
+    meaning changed, such as TaperedDecorated's q, read in their own version's meaning)."""
+    record = dict(record)
+    if "results_version" not in record and record.get("granchain_version") in RESULTS_OF_VERSION:
+        record["results_version"] = RESULTS_OF_VERSION[record.pop("granchain_version")]
+    if isinstance(record.get("family"), dict):
+        record["family"] = _current_family_record(record["family"])
+    return record
+
+
 def check_same_parameters(path, stored: str | None, spec, extend: bool = False) -> int:
     """Refuse to resume a store written with other parameters, listing the differences; returns the
     stored number of realisations (with ``extend``, a store may hold fewer than asked: it is extended)."""
@@ -781,8 +799,12 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
     except ValueError:
         raise ValueError(f"{path}: its parameter record is not valid JSON; delete the store (rm -r {path}) and run again") from None
     new = json.loads(json.dumps(spec.describe(), sort_keys=True))
-    if isinstance(old.get("family"), dict):  # a record of an earlier version is compared in today's form
-        old = {**old, "family": json.loads(json.dumps(_current_family_record(old["family"]), sort_keys=True))}
+    if "family" not in old and "n_large" in old:  # granchain 0.1.0: no family record, no contact forces stored
+        raise ValueError(f"{path} was written by granchain {old.get('granchain_version', '0.1.0')}, before contact forces and "
+                         "family records were stored: it reads (xarray, granchain.analysis, the figures) but cannot be resumed "
+                         "or extended; write a new store (the same family, seed and integrator=granchain.DP5(1e-6, 1e-9) "
+                         "reproduce its realisations bitwise)")
+    old = json.loads(json.dumps(current_record(old), sort_keys=True))  # an earlier version's record, in today's form
     stored_r = old.get("realizations")
     if extend and isinstance(stored_r, int) and stored_r <= new["realizations"]:
         old = {**old, "realizations": new["realizations"]}

@@ -514,7 +514,7 @@ def test_a_tapered_store_written_by_0_4_resumes(tmp_path):
             del rec["large_radii"]
             group.attrs[key] = json.dumps(record, sort_keys=True)
     assert json.loads(root.attrs["granchain_family"])["q"] == 0.9
-    with pytest.warns(StoreRepairWarning, match="written by an earlier version"):  # its metadata brought up to date
+    with pytest.warns(StoreRepairWarning, match="in an earlier version.s form"):  # its metadata brought up to date
         reopened = gc.run_ensemble(fam, out=path, **kw)  # resumes: every chunk is done, nothing recomputed
     assert json.loads(xr.open_zarr(path, consolidated=False).attrs["granchain_family"])["q"] == 0.1
     fresh = gc.run_ensemble(fam, **kw)

@@ -83,7 +83,10 @@ def summary(path: str) -> dict:
             "seed": params["seed"], "chains": params["chains"], "chunk_size": cs, "chunks_done": int((done == 1).sum()),
             "chunks": n_chunks, "realizations_done": int(done_r), "complete": bool((done == 1).all()),
             "damaged_chunks": damaged, "failed_integrations": failures, "status_counts": status_counts,
-            "size_bytes": _size(path), "lock": writing, "granchain_version": params.get("granchain_version")}
+            "size_bytes": _size(path), "lock": writing,
+            # the writer's version is provenance (root attributes); records name it only before results_version
+            "granchain_version": group.attrs.get("granchain_version", params.get("granchain_version")),
+            "results_version": params.get("results_version")}
 
 
 def _integrator_lines(integ: dict, per_chain: dict | None) -> list:
