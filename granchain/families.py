@@ -403,9 +403,9 @@ def _q_of_ratio(ratio: float) -> float:
 @dataclass(frozen=True, init=False)
 class TaperedDecorated(_Decorated):
     """A tapered decorated chain: large radii (1 - q)^(k-1), k = 1..N, the convention of
-    :func:`granchain.tapered` and of the tapered-chain literature (each large granule a fraction q
-    smaller than the one before; Sen, Manciu and Wright, Phys. Rev. E 57, 2386 (1998)): q = 0 is
-    :class:`RandomDecorated` bitwise, q > 0 shrinks, q < 0 grows. In gap j a small granule of radius
+    :func:`granchain.tapered` (each large granule a fraction q smaller than the one before, the
+    tapered chains of the paper's Sec. I): q = 0 is :class:`RandomDecorated` bitwise, q > 0
+    shrinks, q < 0 grows. In gap j a small granule of radius
     X_j min(R_j, R_{j+1}), X_j i.i.d. from ``distribution``: the distribution is that of the ratio of
     the small radius to its smaller neighbour, the ratio that decides the effective description's
     validity.
