@@ -102,3 +102,36 @@ def test_fig4_clockwise_order_common_range_and_sign(stores):
     assert centre[16].x0 > centre[26].x0 and centre[16].y0 < centre[11].y0    # 16 lower right, 26 lower left
     _check(fig)
     data.to_dataset()
+
+
+@pytest.mark.usefixtures("private_theory_cache")
+def test_theory_figure_says_what_it_compares():
+    """The theory figure: labelled axes, no overlapping text; without numerics its title says so; the
+    paper's fit is drawn for the paper's law only, and no stretched exponential is fitted through
+    fewer than six granules (three parameters would fit anything)."""
+    from granchain import theory
+    from granchain.figures import theory as figure
+
+    small = dict(memory=2, nodes=3, samples=1000, profile_windows=100)
+    law = gc.Uniform(0.05, 0.3)
+    data = figure.compute(law, 12, prediction=theory.predict(law, 12, **small))
+    assert data.measured is None and data.fit is not None
+    fig = figure.plot(data)
+    labels = [t.get_text() for ax in fig.axes for t in ax.get_legend().get_texts()]
+    assert not any("paper's fit" in s for s in labels) and any("fit to the theory" in s for s in labels)
+    assert fig.axes[0].get_title().startswith("Theory (no numerics given), U[0.05, 0.3], N = 12")
+    _check_stacked(fig)
+    short = figure.compute(law, 8, prediction=theory.predict(law, 8, **small))
+    assert short.fit is None
+    fig = figure.plot(short)
+    assert not any("fit to the theory" in t.get_text() for ax in fig.axes for t in ax.get_legend().get_texts())
+    _check_stacked(fig)
+
+
+def _check_stacked(fig):
+    """Panels stacked on a shared x axis: the bottom one carries the x label, every one a y label."""
+    fig.canvas.draw()
+    assert text_overlaps(fig) == []
+    assert fig.axes[-1].get_xlabel().strip()
+    assert all(ax.get_ylabel().strip() for ax in fig.axes)
+    plt.close(fig)
