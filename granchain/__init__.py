@@ -84,4 +84,19 @@ __all__ = [
     "tapered",
     "to_physical",
 ]
-from . import dephasing, validity  # noqa: E402  (validity maps, the averaged-pulse decay)
+#: The statistics and the paper's research modules load on first use (``granchain.validity``,
+#: ``from granchain import analysis``, ...): a run of the dynamics does not pay for SciPy's fitting
+#: and statistics imports.
+_LAZY_MODULES = ("analysis", "bca", "dephasing", "figures", "theory", "validity")
+
+
+def __getattr__(name):
+    if name in _LAZY_MODULES:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY_MODULES))

@@ -109,3 +109,17 @@ def test_analysis_still_offers_the_fits(name):
     assert getattr(analysis, name) is getattr(pulsefits, name, getattr(analysis, name))
     with pytest.raises(AttributeError, match="no attribute 'no_such_fit'"):
         analysis.no_such_fit  # noqa: B018
+
+
+def test_research_modules_load_on_first_use():
+    """``import granchain`` does not load the statistics and the paper's research modules (a run of
+    the dynamics does not pay for them); each is there as an attribute when asked for."""
+    import subprocess
+    import sys
+
+    code = ("import sys, granchain as gc; lazy = gc._LAZY_MODULES; "
+            "print(sorted(m for m in lazy if f'granchain.{m}' in sys.modules)); "
+            "print(all(getattr(gc, m).__name__ == f'granchain.{m}' for m in lazy))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]", out
+    assert out[1] == "True", out
