@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import count, exponent, finite_scalar, positive_array
+from .model import FreeEnd, Impulse, PowerLaw, RigidWall
 
 __all__ = [
     "Chain",
@@ -72,6 +73,15 @@ class Chain:
         Radii the chain was built from (None for an effective chain); ``inf`` for a wall.
     kind : str
         A short description ("radii", "decorated", "effective", ...).
+
+    Attributes
+    ----------
+    contact : granchain.model.PowerLaw
+        The contact law (exponent ``n``).
+    boundary : granchain.model.FreeEnd or granchain.model.RigidWall
+        The far end (a wall when the last mass is infinite).
+    initial : granchain.model.Impulse
+        The initial state: granule 1 struck with ``initial_velocity``, the rest at rest.
     """
 
     masses: np.ndarray
@@ -82,6 +92,9 @@ class Chain:
     radii: np.ndarray | None = None
     kind: str = "custom"
     meta: dict = field(default_factory=dict, repr=False)
+    contact: PowerLaw = field(init=False, repr=False)
+    boundary: FreeEnd | RigidWall = field(init=False, repr=False)
+    initial: Impulse = field(init=False, repr=False)
 
     def __post_init__(self):
         m = _masses_with_wall(self.masses)
@@ -116,6 +129,9 @@ class Chain:
         object.__setattr__(self, "initial_velocity", v0)
         object.__setattr__(self, "observed", _frozen(obs))
         object.__setattr__(self, "radii", None if radii is None else _frozen(radii))
+        object.__setattr__(self, "contact", PowerLaw(n))
+        object.__setattr__(self, "boundary", RigidWall(float(c[-1])) if wall else FreeEnd())
+        object.__setattr__(self, "initial", Impulse(v0))
 
     # -- derived quantities -------------------------------------------------
     @property
@@ -125,19 +141,19 @@ class Chain:
 
     @property
     def wall(self) -> bool:
-        """Whether the last granule is a rigid wall (infinite mass)."""
-        return bool(np.isinf(self.masses[-1]))
+        """Whether the far end is a rigid wall (:attr:`boundary`; the last granule has infinite mass)."""
+        return self.boundary.wall
 
     @property
     def energy(self) -> float:
         """Total energy, all kinetic at t = 0: m_1 v_1^2 / 2 (a wall, at rest, has none)."""
-        return 0.5 * float(self.masses[0]) * self.initial_velocity**2
+        return self.initial.energy(self.masses)
 
     @property
     def momentum(self) -> float:
         """Total momentum m_1 v_1 of the granules (conserved with free ends; with a wall the
         granules lose the wall's impulse, :attr:`granchain.PulseResult.wall_impulse`)."""
-        return float(self.masses[0]) * self.initial_velocity
+        return self.initial.momentum(self.masses)
 
     def with_wall(self, stiffness: float | None = None) -> "Chain":
         """The same chain ending in a rigid wall: one more granule, of infinite mass.

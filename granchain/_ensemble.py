@@ -134,7 +134,7 @@ class EnsembleSpec:
         set_("chunk_size", count("chunk_size", self.chunk_size, minimum=1))
         if not isinstance(self.controls, RunControls):
             raise ValueError(f"controls must be a granchain.RunControls, got {self.controls!r}")
-        if self.lags is not None:  # the aligned pulse (granchain._kernels._aligned); None: not accumulated
+        if self.lags is not None:  # the aligned pulse (granchain.backends.kernels.aligned); None: not accumulated
             lags = np.array(np.asarray(self.lags, dtype=float).reshape(-1))
             if lags.size == 0 or not np.all(np.isfinite(lags)) or np.any(np.diff(lags) <= 0):
                 raise ValueError("lags must be a non-empty, finite, increasing array of times relative to each "

@@ -1,17 +1,14 @@
-"""Integrators as small frozen dataclasses plus a registry (like scipy's METHODS).
+"""Integrators as data: small frozen dataclasses of settings with declared capabilities, plus a
+registry (like scipy's METHODS).
 
-Each declares its ``name`` and convergence ``order``; the test-suite loops over
-:data:`INTEGRATORS` and measures every order. All share one contract: integrate
-a :class:`~granchain.Chain` from its initial state, record the peaks of the
-observed granules between steps and, on request, their velocities on a grid
-(:meth:`Integrator.integrate`), and do the same for a batch of chains of one size
-with the ensemble's fixed-point sums (:meth:`Integrator.integrate_batch`). That is
-the one seam through which ``simulate`` and ``run_ensemble`` reach any integrator.
-
-Compiled integrators (DP5, Verlet) name a Numba kernel by id and pack their settings
-into a float64 array; both paths then run the same compiled code
-(``granchain._kernels._dispatch``). A pure-Python integrator (DOP853) gets a batch
-loop for free, with the same fixed-point accumulation.
+Each declares its ``name``, its convergence ``order``, the ``backend`` that runs it
+(``granchain.backends``: "numba" for the compiled DP5, RKN4 and Verlet, "scipy" for DOP853) and
+what it needs of the model and supports: ``needs_conservative_forces`` (a method for x'' = f(x):
+RKN4, Verlet), ``supports_goal_control`` (the relaxed zone and trailing window of DP5 and RKN4).
+None of them calls compiled code: :meth:`Integrator.integrate` and :meth:`Integrator.integrate_batch`
+hand the integrator and the chain to its backend, which binds them to its code. That is the one seam
+through which ``simulate`` and ``run_ensemble`` reach any integrator; the test-suite loops over
+:data:`INTEGRATORS`, measures every order and runs every backend over the same cases.
 """
 
 from __future__ import annotations
@@ -22,11 +19,6 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._kernels._common import INFO_SIZE, INFO_STEPS, INFO_T_END, final_energy, power_code
-from ._kernels._aligned import accumulate_aligned
-from ._kernels._dispatch import KERNEL_DP5, KERNEL_RKN4, KERNEL_VERLET, integrate_chain
-from ._kernels._ensemble import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces, integrate_batch, thread_sums
-from ._reference import dop853_integrate
 from ._validate import count, finite_scalar
 
 __all__ = ["Integrator", "DP5", "RKN4", "Verlet", "VerletStabilityWarning", "verlet_omega_max", "DOP853", "INTEGRATORS", "RunControls", "get_integrator"]
@@ -84,45 +76,50 @@ class RunControls:
         object.__setattr__(self, "max_steps", count("max_steps", self.max_steps, minimum=1))
 
 
-def _outputs(n_observed: int, n_grid: int, n_granules: int):
-    # velocities time-major: one contiguous row per grid time; forces per contact (M - 1)
-    return (np.zeros(n_observed), np.zeros(n_observed), np.zeros((n_grid, n_observed)), np.zeros(n_granules - 1),
-            np.zeros(n_granules - 1), np.zeros(n_grid), np.zeros(INFO_SIZE))
-
-
-def _aligned_outputs(out: dict, n_observed: int):
-    """(lags, sum_a, sum_a2) of ``out`` for the aligned pulse (``_kernels._aligned``); an empty
-    lag grid (no aligned pulse asked) when ``out`` has no ``"lags"``."""
-    if out.get("lags") is None:
-        empty = np.zeros((0, n_observed), dtype=np.int64)
-        return np.zeros(0), empty, empty.copy()
-    return np.asarray(out["lags"], dtype=float), out["sum_a"], out["sum_a2"]
-
-
 class Integrator:
-    """Base of every integrator: a frozen dataclass of settings with a ``name`` and an ``order``."""
+    """Base of every integrator: a frozen dataclass of settings with a ``name``, an ``order``, the
+    ``backend`` that runs it and its capabilities (see the module doc)."""
 
     name: ClassVar[str]
     order: ClassVar[int]
+    backend: ClassVar[str] = "numba"
+    #: A method for x'' = f(x): needs forces that depend on positions only.
+    needs_conservative_forces: ClassVar[bool] = False
+    #: Has the goal-oriented error control (relaxed zone, trailing window) of :class:`DP5`.
+    supports_goal_control: ClassVar[bool] = False
+
+    @property
+    def goal_oriented(self) -> bool:
+        """True when the goal-oriented error control is on (never for integrators without it)."""
+        return False
 
     def describe(self) -> dict:
         """JSON-able record of the integrator and all its settings (stored with ensembles)."""
         return {"name": self.name, **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)}}
 
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
-        """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state).
+    def check_chains(self, masses, stiffness, n, initial_velocity) -> None:
+        """Called with the chains (rows) before every integration: warn or refuse where the method
+        cannot work (e.g. a fixed step beyond its stability limit). Nothing by default."""
 
-        Returns (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f), see
-        ``granchain._kernels._dispatch``: peak_f, peak_ft per contact (M - 1), grid_f the wall force
-        on the grid (zeros without a wall).
+    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
+        """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state), on this
+        integrator's backend.
+
+        Returns (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f): the status code, the
+        run's ``info`` (slots ``INFO_*`` of ``granchain.backends.kernels.records``), per observed granule
+        its peak velocity and time and its velocities on ``t_grid`` (time-major), per contact (M - 1)
+        its peak force and time, and the wall force on the grid (zeros without a wall).
         """
-        raise NotImplementedError
+        from .backends import get_backend
+
+        return get_backend(self.backend).integrate(self, chain, x, v, t_grid=t_grid, t_max=t_max,
+                                                   stop_at_exit=stop_at_exit, controls=controls)
 
     def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
                         controls: RunControls, scale: float, out: dict) -> None:
         """Integrate a batch of chains (rows of ``masses`` (R, M), ``stiffness`` (R, M-1),
         ``initial_velocity`` (R,), shared ``observed`` and recorded ``contacts``, 0-based),
-        stopping at the pulse's exit (or its return from a wall).
+        stopping at the pulse's exit (or its return from a wall), on this integrator's backend.
 
         Writes ``out["peak_velocity"]``/``["peak_time"]`` (R, K), ``["peak_force"]``/
         ``["peak_force_time"]`` (R, C) of the contacts ``contacts``, ``["peak_wall"]`` (R, 2: the
@@ -131,81 +128,16 @@ class Integrator:
         sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) (and of
         the wall force to ``["sum_wall"]`` (T,)) and counts them in ``["n_valid"]`` (1,). With
         ``out["lags"]`` (L,), also adds the aligned pulse's sums to ``["sum_a"]``/``["sum_a2"]``
-        (L, K) (``_kernels._aligned``). This generic version loops in Python over
-        :meth:`integrate`; compiled integrators override it with a parallel kernel.
+        (L, K) (``granchain.backends.kernels.aligned``).
         """
-        from ._chain import Chain
+        from .backends import get_backend
 
-        R, M = masses.shape
-        wall = bool(np.isinf(masses[0, -1]))
-        for r in range(R):
-            chain = Chain(masses[r], stiffness[r], n, initial_velocity[r], observed)
-            x, v = np.zeros(M), np.zeros(M)
-            v[0] = initial_velocity[r]
-            st, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = self.integrate(
-                chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=True, controls=controls)
-            out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
-            gather_forces(peak_f, peak_ft, contacts, wall, out["peak_force"][r], out["peak_force_time"][r], out["peak_wall"][r])
-            out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]
-            e0 = 0.5 * masses[r, 0] * initial_velocity[r] * initial_velocity[r]  # the expression of the compiled batch
-            out["energy_error"][r] = (final_energy(x, v, masses[r], stiffness[r], n, info) - e0) / e0
-            if st == 0:
-                out["n_valid"][0] += 1
-                accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])
-                if wall:
-                    accumulate_fixed_point_1d(grid_f, scale, out["sum_wall"])
-                lags, sum_a, sum_a2 = _aligned_outputs(out, len(observed))
-                accumulate_aligned(t_grid, np.ascontiguousarray(grid_v), np.asarray(peak_t, dtype=float), lags, scale,
-                                   sum_a, sum_a2)
-
-
-class _Compiled(Integrator):
-    """An integrator with a Numba kernel (``kernel_id``) and settings packed by ``kernel_params``."""
-
-    kernel_id: ClassVar[int]
-
-    def kernel_params(self) -> np.ndarray:
-        raise NotImplementedError
-
-    def check_chains(self, masses, stiffness, n, initial_velocity) -> None:
-        """Called with the chains (rows) before every integration: warn or refuse where the method
-        cannot work (e.g. a fixed step beyond its stability limit). Nothing by default."""
-
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
-        self.check_chains(chain.masses[None], chain.stiffness[None], chain.n, chain.initial_velocity)
-        peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info = _outputs(chain.observed.size, t_grid.size, chain.size)
-        status = integrate_chain(
-            self.kernel_id, self.kernel_params(), chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.observed,
-            t_max, stop_at_exit, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, x, v,
-            peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info,
-        )
-        return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f
-
-    def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls: RunControls, scale: float, out: dict) -> None:
-        import numba
-
-        self.check_chains(masses, stiffness, n, initial_velocity)
-        lags, sum_a, sum_a2 = _aligned_outputs(out, observed.shape[0])
-        # Dynamic scheduling, one realisation at a time. Realisations differ in cost by up to 16x
-        # (N = 6 decorated chains), and Numba's default static split (each thread a contiguous
-        # half of the batch) left a thread idle for 1.2-3.6 % of a 1000-realisation chunk of the
-        # paper's set (computed from its per-realisation step counts; 0.1 % dynamic). Results do not
-        # change: realisations are independent and the sums are integers (test_ensemble). The
-        # per-thread sums are allocated here, not in the kernel (see thread_sums).
-        with numba.parallel_chunksize(1):
-            integrate_batch(
-                self.kernel_id, self.kernel_params(), masses, stiffness, n, power_code(n), initial_velocity, observed,
-                contacts, t_max, controls.exit_margin, controls.max_steps, controls.peak_rtol, t_grid, scale,
-                out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
-                out["status"], out["energy_error"], out["n_steps"], out["t_end"], out["sum_v"], out["sum_v2"], out["sum_wall"],
-                out["n_valid"], lags, sum_a, sum_a2,
-                *thread_sums(numba.get_num_threads(), t_grid.size, observed.shape[0], lags.size),
-            )
+        get_backend(self.backend).integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts,
+                                                  t_grid=t_grid, t_max=t_max, controls=controls, scale=scale, out=out)
 
 
 @dataclass(frozen=True)
-class DP5(_Compiled):
+class DP5(Integrator):
     """Compiled adaptive Dormand-Prince 5(4), PI step control, max-norm error (simulate's default).
 
     The defaults keep peak velocities and times within ~1e-7 (relative) of DOP853 at rtol 1e-10
@@ -259,7 +191,7 @@ class DP5(_Compiled):
     it). Granules behind the window are no longer integrated: their velocity on the time grid is
     the one they left with, their contact forces stop, and the energy report counts their kinetic
     energy and the potential of their contacts at the time they left
-    (``granchain._kernels._common.final_energy``). Their final positions are continued ballistically
+    (``granchain.backends.kernels.forces.final_energy``). Their final positions are continued ballistically
     and may overlap (contacts behind the window are not resolved): compute no energy from the
     returned positions of a windowed run. The relaxed zone's looser tolerance shows in
     the energy report as a drift typically ~1e-4 instead of ~1e-5 (worst in the paper's set: 2.6e-3,
@@ -277,7 +209,7 @@ class DP5(_Compiled):
 
     name: ClassVar[str] = "dp5"
     order: ClassVar[int] = 5
-    kernel_id: ClassVar[int] = KERNEL_DP5
+    supports_goal_control: ClassVar[bool] = True
     #: The tolerances of :meth:`relaxed` and :meth:`windowed` (validated, tests/test_window.py).
     goal_tolerances: ClassVar[tuple] = (1e-6, 1e-9)
 
@@ -307,6 +239,12 @@ class DP5(_Compiled):
         """True when every granule is integrated to the end with the full tolerance."""
         return self.relaxed_lag is None and self.window_lag is None
 
+    @property
+    def goal_oriented(self) -> bool:
+        """True with a relaxed zone or a trailing window (switched off for chains whose boundary does
+        not license them: ``granchain.backends.effective_integrator``)."""
+        return not self.is_exact
+
     @classmethod
     def relaxed(cls, rtol: float | None = None, atol: float | None = None) -> "DP5":
         """The method with the validated relaxed zone: granules more than 4 observed granules behind
@@ -335,10 +273,6 @@ class DP5(_Compiled):
                 record.pop(key)
         return record
 
-    def kernel_params(self) -> np.ndarray:
-        return np.array([self.rtol, self.atol, self.first_step, self.fixed_step or 0.0, self.relaxed_lag or 0,
-                         self.relaxed_factor, self.window_lag or 0])
-
 
 @dataclass(frozen=True)
 class RKN4(DP5):
@@ -346,7 +280,7 @@ class RKN4(DP5):
     DP5's settings, step control, goal-oriented zones and records, with a method made for x'' = f(x).
 
     Three force evaluations per step (DP5: six), order 4 with a 3rd-order error estimate, dense
-    output by the quintic Hermite interpolant of the positions (``granchain._kernels._rkn``). A
+    output by the quintic Hermite interpolant of the positions (``granchain.backends.kernels.rkn4``). A
     decorated chain's step is set by its light granules' oscillations; there this pair neither
     grows nor damps an oscillation up to h omega = 3.77 (DP5 grows beyond h omega ~ 1), and on
     random N = 26 decorated chains it takes ~0.9x DP5's steps at half the force evaluations each.
@@ -359,7 +293,7 @@ class RKN4(DP5):
 
     name: ClassVar[str] = "rkn4"
     order: ClassVar[int] = 4
-    kernel_id: ClassVar[int] = KERNEL_RKN4
+    needs_conservative_forces: ClassVar[bool] = True
 
     #: The tolerances of ``RKN4.relaxed()`` and ``RKN4.windowed()`` (those of the decorated ensembles,
     #: ``granchain.ENSEMBLE_RTOL``, ``ENSEMBLE_ATOL``): peaks as accurate as ``DP5.relaxed()``'s.
@@ -395,7 +329,7 @@ def verlet_omega_max(masses, stiffness, n, initial_velocity) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Verlet(_Compiled):
+class Verlet(Integrator):
     """Compiled fixed-step velocity Verlet (symplectic, order 2).
 
     Stability: velocity Verlet is stable only for dt * omega_max <= 2, omega_max the chain's highest
@@ -410,13 +344,10 @@ class Verlet(_Compiled):
 
     name: ClassVar[str] = "verlet"
     order: ClassVar[int] = 2
-    kernel_id: ClassVar[int] = KERNEL_VERLET
+    needs_conservative_forces: ClassVar[bool] = True
 
     def __post_init__(self):
         object.__setattr__(self, "dt", finite_scalar("dt", self.dt, positive=True))
-
-    def kernel_params(self) -> np.ndarray:
-        return np.array([self.dt])
 
     def check_chains(self, masses, stiffness, n, initial_velocity) -> None:
         """Warn (:class:`granchain.VerletStabilityWarning`) where dt * omega_max > 2 (see the class docstring)."""
@@ -442,21 +373,12 @@ class DOP853(Integrator):
 
     name: ClassVar[str] = "dop853"
     order: ClassVar[int] = 8
+    backend: ClassVar[str] = "scipy"
 
     def __post_init__(self):
         rtol, atol = _tolerances(self.rtol, self.atol)
         object.__setattr__(self, "rtol", rtol)
         object.__setattr__(self, "atol", atol)
-
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
-        status, info, peak_v, peak_t, grid_v, xf, vf, peak_f, peak_ft, grid_f = dop853_integrate(
-            chain.masses, chain.stiffness, chain.n, chain.observed, x.copy(), v.copy(),
-            rtol=self.rtol, atol=self.atol, t_max=t_max, stop_at_exit=stop_at_exit,
-            exit_margin=controls.exit_margin, max_steps=controls.max_steps, peak_rtol=controls.peak_rtol, t_grid=t_grid,
-        )
-        x[:] = xf
-        v[:] = vf
-        return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f
 
 
 #: Registered integrators by name (the CLI's ``--integrator`` choices).

@@ -8,7 +8,8 @@ import numpy as np
 
 from ._chain import Chain
 from ._integrators import RunControls, get_integrator
-from ._kernels._common import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END, final_energy, total_momentum
+from .backends.kernels.forces import final_energy, total_momentum
+from .backends.kernels.records import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END
 from ._status import Status
 from ._validate import finite_scalar
 from .units import rescaled_attrs

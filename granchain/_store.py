@@ -113,7 +113,7 @@ AVERAGED = (
 )
 
 #: The aligned pulse (only in ensembles run with ``lags``): <v_k(t_k^peak + tau)> over successful
-#: realisations, each shifted by its own peak time at k (granchain._kernels._aligned).
+#: realisations, each shifted by its own peak time at k (granchain.backends.kernels.aligned).
 ALIGNED = (
     Variable("aligned_velocity", ("chain", "granule", "lag"), "float64", np.nan, UNITS_V,
              "aligned pulse <v_k(t_k^peak + tau)>: velocity of large granule k at lag tau after the realisation's own peak there"),

@@ -157,7 +157,7 @@ def _simulate_batch(masses: np.ndarray, stiffness: np.ndarray, n: float, observe
     """Peak velocity and time of the ``observed`` granules (default all) of a batch of chains struck
     at granule 1 with v = 1, by the compiled DP5 batch kernel that ensembles use. With ``lags``,
     also the batch's aligned pulse <v(t_peak + tau)> per observed granule (on a grid of step
-    ``dt``, cubic interpolation: ``granchain._kernels._aligned``)."""
+    ``dt``, cubic interpolation: ``granchain.backends.kernels.aligned``)."""
     from ._integrators import DP5, RunControls
     from ._simulate import time_limit
 
@@ -402,7 +402,7 @@ def aligned_profiles(distribution, n_large: int, settings: TheorySettings, *, wi
 
     Granule k is the step granule of the window of step k - 1 (k = N: the flying granule of the
     last window). ``windows`` window chains per window type are drawn with the quadrature
-    weights and integrated with the aligned pulse accumulated (``granchain._kernels._aligned``).
+    weights and integrated with the aligned pulse accumulated (``granchain.backends.kernels.aligned``).
     Returns {k: (tau, S, p)}, p the windows' mean peak at that granule (the amplitude at which
     tau is measured: the pulse duration scales as amplitude^(-(n-2)/n)). The window keeps the
     pulse's dressing by its ``memory`` contacts: in a random chain the pulse is broader than

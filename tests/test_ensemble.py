@@ -508,7 +508,7 @@ print(json.dumps({{"ensemble": int(ds["n_steps"].values[0, 0]), "simulate": r.n_
 @pytest.mark.slow
 def test_kernel_cache_follows_edits_of_the_integrator(tmp_path):
     """``cache=True`` keys a kernel's cache on its own source file only. The ensemble kernel
-    (``_kernels/_ensemble.py``) inlines ``rk_integrate`` (``_kernels/_dp5.py``): after an edit of
+    (``backends/kernels/batch.py``) inlines ``rk_integrate`` (``backends/kernels/rkloop.py``): after an edit of
     the integrator alone, a stale cache would make ``run_ensemble`` integrate with the old code
     while ``simulate`` uses the new one. On a copy of the package: warm the cache, change the
     step-size controller's safety factor, and check that both still take the same steps."""
@@ -524,9 +524,9 @@ def test_kernel_cache_follows_edits_of_the_integrator(tmp_path):
 
     before = probe()
     assert before["ensemble"] == before["simulate"]
-    dp5 = root / "granchain" / "_kernels" / "_dp5.py"
+    dp5 = root / "granchain" / "backends" / "kernels" / "rkloop.py"
     text = dp5.read_text()
-    assert "\nSAFETY = 0.9\n" in text, "the probe edits SAFETY = 0.9 in _kernels/_dp5.py: update the test"
+    assert "\nSAFETY = 0.9\n" in text, "the probe edits SAFETY = 0.9 in backends/kernels/rkloop.py: update the test"
     dp5.write_text(text.replace("\nSAFETY = 0.9\n", "\nSAFETY = 0.8\n"))
     after = probe()
     assert after["simulate"] != before["simulate"], "the edit should change the step sequence"

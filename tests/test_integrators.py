@@ -138,13 +138,14 @@ def test_dp5_error_follows_rtol():
 def _error_norm_case(method, seed, hi=50):
     """Random state and stages of ``hi`` granules: (hi, Kx, Kv, ratio, norm), ``norm()`` the error
     norm of ``method`` on the arrays as they are when called (its ratios left in ``ratio``)."""
-    from granchain._kernels._dp5 import _error_norm
+    from granchain.backends.kernels.records import Steps
+    from granchain.backends.kernels.rkloop import error_norm
 
     rng = np.random.default_rng(seed)
     x, v, xs, vs = (rng.random(hi) for _ in range(4))
     Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
     ratio = np.zeros(2 * hi)
-    return hi, Kx, Kv, ratio, lambda: _error_norm(method, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
+    return hi, Kx, Kv, ratio, lambda: error_norm(method, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, Steps(1e-6, 1e-9, 0.0, 0.0, 0, 1.0, 0), ratio)
 
 
 @pytest.mark.parametrize("where", [0, 1, 5, 40, 99])
@@ -152,9 +153,9 @@ def test_dp5_error_norm_keeps_a_nan(where):
     """A NaN ratio anywhere makes the error norm infinite (the step is refused as non-finite), also when
     finite ratios follow it (the max loop once let a later finite ratio overwrite the NaN); with all
     ratios finite the norm is their maximum, wherever it is."""
-    from granchain._kernels._dp5 import METHOD_DP5
+    from granchain.backends.kernels.records import KIND_DP5
 
-    hi, Kx, Kv, ratio, norm = _error_norm_case(METHOD_DP5, where)
+    hi, Kx, Kv, ratio, norm = _error_norm_case(KIND_DP5, where)
     err = norm()
     assert err == ratio.max() and math.isfinite(err)
     (Kx if where < hi else Kv)[3, where % hi] = np.nan
@@ -166,9 +167,9 @@ def test_dp5_error_norm_keeps_a_nan(where):
 def test_rkn4_error_norm_keeps_a_nan(where):
     """The same for RKN4's error estimate, which reads the stage accelerations Kv[0..3] only: a NaN
     there makes both the position and the velocity ratio of that granule NaN and the norm infinite."""
-    from granchain._kernels._dp5 import METHOD_RKN4
+    from granchain.backends.kernels.records import KIND_RKN4
 
-    hi, Kx, Kv, ratio, norm = _error_norm_case(METHOD_RKN4, where)
+    hi, Kx, Kv, ratio, norm = _error_norm_case(KIND_RKN4, where)
     err = norm()
     assert err == ratio.max() and math.isfinite(err)
     Kx[:, where] = np.nan  # not read by RKN4
@@ -186,7 +187,8 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
     """The error norm takes the maximum of the ratios as an integer maximum of their bit patterns; it
     must be exactly the floating-point maximum of |error| / scale computed independently (NumPy, the
     same operations in the same order), from subnormal to overflowing errors (inf: refused step)."""
-    from granchain._kernels import _dp5
+    from granchain.backends.kernels import dp5, rkloop
+    from granchain.backends.kernels.records import KIND_DP5, Steps
 
     rng = np.random.default_rng(seed)
     x, v, xs, vs = (rng.standard_normal(hi) for _ in range(4))
@@ -195,9 +197,10 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
     with np.errstate(over="ignore", under="ignore"):
         Kx = np.ldexp(Kx, exponent)  # scaled by 2^exponent: subnormal ... inf
     h, rtol, atol, factor = 1e-3, 1e-6, 1e-9, 1000.0
-    err = _dp5._error_norm(_dp5.METHOD_DP5, x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, np.zeros(2 * hi))
+    err = rkloop.error_norm(KIND_DP5, x, v, xs, vs, Kx, Kv, h, hi, relaxed, Steps(rtol, atol, 0.0, 0.0, 0, factor, 0),
+                             np.zeros(2 * hi))
 
-    E = (_dp5.E1, _dp5.E3, _dp5.E4, _dp5.E5, _dp5.E6, _dp5.E7)
+    E = (dp5.E1, dp5.E3, dp5.E4, dp5.E5, dp5.E6, dp5.E7)
     rows = (0, 2, 3, 4, 5, 6)
     w = np.where(np.arange(hi) < relaxed, factor, 1.0)
     with np.errstate(all="ignore"):
@@ -215,7 +218,7 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
 PADDING_SCRIPT = """
 import json, numba, numpy as np, granchain as gc
 from granchain._integrators import RunControls
-from granchain._kernels import _dp5
+from granchain.backends.kernels import rkloop
 assert numba.config.DISABLE_JIT
 cases = {f"decorated N={k}": gc.decorated([0.3, 0.2, 0.35, 0.25, 0.3, 0.22][: k - 1]) for k in (2, 3, 4, 5, 6, 7)}
 cases.update({f"monodisperse {k}": gc.monodisperse(k) for k in (2, 4, 6, 8, 9)})
@@ -228,21 +231,21 @@ def run(chain, integ):
                                             stop_at_exit=True, controls=RunControls())
     return [int(status), info.tolist(), x.tolist(), v.tolist()] + [np.asarray(a).tolist() for a in arrays]
 padded = {f"{c}/{i}": run(chain, integ) for c, chain in cases.items() for i, integ in integrators.items()}
-widths = sorted({_dp5.padded_width(hw) for hw in range(1, 20)})
-_dp5.padded_width = lambda hw: hw  # the loops end at the window's end: the unpadded layout
+widths = sorted({rkloop.padded_width(hw) for hw in range(1, 20)})
+rkloop.padded_width = lambda hw: hw  # the loops end at the window's end: the unpadded layout
 plain = {f"{c}/{i}": run(chain, integ) for c, chain in cases.items() for i, integ in integrators.items()}
 print(json.dumps(dict(padded=padded, plain=plain, widths=widths)))
 """
 
 
 def test_padded_loops_are_bitwise_the_window(run_without_jit):
-    """The DP5 loops run to the next multiple of ``_dp5.LANES`` past the window (padded layout); the
+    """The DP5 loops run to the next multiple of ``rkloop.LANES`` past the window (padded layout); the
     extra granules (at rest ahead of the pulse, or padding with zero stiffness and inverse mass) must
     change nothing: with the loops ending at the window's end instead, every output is bitwise the
     same. Pure-Python kernels (NUMBA_DISABLE_JIT) so that the loop length can be swapped; chains of
     2 to 13 granules (every remainder mod 8, and the chain's end inside the padding), exact and with
     trailing-window cuts (which shift the stage arrays)."""
-    from granchain._kernels._common import INFO_WINDOW_START
+    from granchain.backends.kernels.records import INFO_WINDOW_START
 
     out = run_without_jit(PADDING_SCRIPT, timeout=600)
     assert out["widths"] == [8, 16, 24]
@@ -260,7 +263,7 @@ def test_borrowed_views_share_memory():
     very arrays the caller passed, so the kernel's writes reach them."""
     from numba import njit
 
-    from granchain._kernels._common import borrowed, keep_alive
+    from granchain.backends.kernels.memory import borrowed, keep_alive
 
     @njit
     def fill(a, b):

@@ -28,10 +28,10 @@ SCRIPT = textwrap.dedent(
     import numba
     import numpy as np
     import granchain as gc
-    from granchain._kernels import _common, _dp5, _verlet
+    from granchain.backends.kernels import forces, rkloop, verlet
 
     assert numba.config.DISABLE_JIT
-    for f in (_dp5.rk_integrate, _verlet.verlet_integrate, _common.accelerations):
+    for f in (rkloop.rk_integrate, verlet.verlet_integrate, forces.accelerations):
         assert inspect.isfunction(f), type(f)
 
     chains = {chains}
@@ -55,9 +55,9 @@ def nojit_results(run_without_jit):
 
 
 def test_compiled_in_this_process():
-    from granchain._kernels import _dp5
+    from granchain.backends.kernels import rkloop
 
-    assert hasattr(_dp5.rk_integrate, "py_func")  # a Numba dispatcher here
+    assert hasattr(rkloop.rk_integrate, "py_func")  # a Numba dispatcher here
 
 
 @pytest.mark.parametrize("integrator", INTEGRATORS)

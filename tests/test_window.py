@@ -50,7 +50,7 @@ import granchain as gc
 from conftest import in_order
 from granchain import _ensemble as ens
 from granchain._integrators import RELAXED_FACTOR, RELAXED_LAG, WINDOW_LAG, RunControls, integrator_from_record
-from granchain._kernels._common import INFO_FROZEN_POTENTIAL, INFO_STEPS, INFO_WINDOW_START
+from granchain.backends.kernels.records import INFO_FROZEN_POTENTIAL, INFO_STEPS, INFO_WINDOW_START
 from granchain._simulate import default_t_max
 
 N = 26

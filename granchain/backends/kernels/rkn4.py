@@ -1,7 +1,7 @@
 """Runge-Kutta-Nystrom 4(3) for x'' = f(x): the stages, error estimate and dense output of the
 embedded pair "RKN4(3)4FM" of J. R. Dormand, M. E. A. El-Mikkawy and P. J. Prince, IMA J. Numer.
 Anal. 7, 235 (1987) (the same tables as ``DPRKN4`` of Julia's OrdinaryDiffEq). The step loop,
-peaks, window and records are DP5's (``_dp5``, ``METHOD_RKN4``); this module only supplies what
+peaks, window and records are DP5's (``rkloop``, ``KIND_RKN4``); this module only supplies what
 differs.
 
 Why a Nystrom pair for granular chains: the equation of motion (Eq. motion_rescaled) is second
@@ -22,7 +22,7 @@ x' = x + h v + h^2 sum b_s f_s (= x_3, so f_3 = f(x')), v' = v + h sum bp_s f_s.
 Dense output: the quintic Hermite interpolant of the positions through (x, v, f) at both ends of
 the step (positions to O(h^6), velocities, its derivative, to O(h^5); the method itself is of
 order 4). It is stored in the slots of DP5's stage arrays so that the shared routines evaluate both
-methods as y + h sum_s K[s] Q[s] (``_dp5.dense_value``), with separate weights for positions (``Qx``,
+methods as y + h sum_s K[s] Q[s] (``dense.dense_value``), with separate weights for positions (``Qx``,
 with ``Kx``) and velocities (``Qv``, with ``Kv``): see :func:`dense_data`.
 """
 
@@ -30,8 +30,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from ._common import accelerations
-from ._jit import JIT, JIT_INLINE
+from .forces import accelerations
+from .jit import JIT, JIT_INLINE
 
 ORDER = 4
 
@@ -50,19 +50,19 @@ LAST = 3
 
 
 @njit(**JIT_INLINE)
-def stages(x, v, Kv, xs, vs, h, hi, c, inv_m, n, pw, F):
+def stages(x, v, Kv, xs, vs, h, hi, fm, F):
     """Stages 1..3 of one step over granules 0..hi-1 (``Kv[0]`` holds f(x)); on return ``xs``, ``vs``
     hold the new state and ``Kv[3]`` the force per mass there (three force evaluations)."""
     h2 = h * h
     for i in range(hi):
         xs[i] = x[i] + h * (C1 * v[i]) + h2 * (A10 * Kv[0, i])
-    accelerations(xs, c, inv_m, n, pw, hi, F, Kv[1])
+    accelerations(xs, fm, hi, F, Kv[1])
     for i in range(hi):
         xs[i] = x[i] + h * (C2 * v[i]) + h2 * (A20 * Kv[0, i] + A21 * Kv[1, i])
-    accelerations(xs, c, inv_m, n, pw, hi, F, Kv[2])
+    accelerations(xs, fm, hi, F, Kv[2])
     for i in range(hi):
         xs[i] = x[i] + h * v[i] + h2 * (B0 * Kv[0, i] + B1 * Kv[1, i] + B2 * Kv[2, i])
-    accelerations(xs, c, inv_m, n, pw, hi, F, Kv[3])
+    accelerations(xs, fm, hi, F, Kv[3])
     for i in range(hi):
         vs[i] = v[i] + h * (P0 * Kv[0, i] + P1 * Kv[1, i] + P2 * Kv[2, i] + P3 * Kv[3, i])
 
@@ -71,7 +71,7 @@ def stages(x, v, Kv, xs, vs, h, hi, c, inv_m, n, pw, F):
 def error_ratios(x, v, xs, vs, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
     """|embedded error| / (w_i (atol + rtol max(|y|, |y_new|))) of positions (ratio[0:hi]) and
     velocities (ratio[hi:2 hi]), w_i = ``factor`` in the relaxed zone (granules 0..relaxed-1), else 1
-    (as ``_dp5._error_norm``, which takes their maximum)."""
+    (as ``dp5.error_ratios``; ``rkloop.error_norm`` takes their maximum)."""
     h2 = h * h
     for i in range(hi):
         w = factor if i < relaxed else 1.0

@@ -1,4 +1,4 @@
-"""SciPy's DOP853 on the same problem: the independent reference integrator.
+"""The SciPy backend: SciPy's DOP853 on the same problem, the independent reference integrator.
 
 Everything here is plain NumPy/SciPy, sharing no numerical code with the
 compiled kernels: the right-hand side of Eq. (motion_rescaled) is vectorised
@@ -17,7 +17,11 @@ import numpy as np
 from scipy.integrate import DOP853 as _SciPyDOP853
 from scipy.optimize import brentq
 
-from ._kernels._common import INFO_SIZE, MAX_STEPS, NONFINITE, RATTLER_MASS_RATIO, STEP_UNDERFLOW, SUCCESS, T_MAX, write_info
+from .._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
+from . import Backend
+from .kernels.peaks import write_info
+from .kernels.records import INFO_SIZE
+from .kernels.stop import RATTLER_MASS_RATIO
 
 
 def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float):
@@ -59,7 +63,7 @@ def _first_nonpositive(f, t0, t1):
 
 
 def _pulse_has_left(x, v, m) -> bool:
-    """Same rule as granchain._kernels._common.pulse_is_out (wall_released with a wall, else pulse_has_left)."""
+    """Same rule as the kernels' ``stop.pulse_is_out`` (wall_released with a wall, else pulse_has_left)."""
     if np.isinf(m[-1]):  # a wall: its contact open and the granule next to it moving away
         return bool(x[-2] - x[-1] <= 0.0 and v[-2] < 0.0)
     if x[-2] - x[-1] > 0.0:
@@ -164,3 +168,22 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     info = np.zeros(INFO_SIZE)
     write_info(info, solver.t, n_steps, 0, exit_since, solver.nfev, 0, 0.0)  # no rejections counted, no window
     return status, info, peak_v, peak_t, grid_v, solver.y[:M].copy(), solver.y[M:].copy(), peak_f, peak_ft, grid_f
+
+
+class ScipyBackend(Backend):
+    """Runs :class:`granchain.DOP853` (and any integrator that names this backend) with SciPy, in
+    plain Python: slow, and sharing no numerical code with the compiled kernels, which is its point.
+    Batches run realisation by realisation (:meth:`Backend.integrate_batch`)."""
+
+    name = "scipy"
+
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls):
+        self.check(integrator, chain)
+        status, info, peak_v, peak_t, grid_v, xf, vf, peak_f, peak_ft, grid_f = dop853_integrate(
+            chain.masses, chain.stiffness, chain.n, chain.observed, x.copy(), v.copy(),
+            rtol=integrator.rtol, atol=integrator.atol, t_max=t_max, stop_at_exit=stop_at_exit,
+            exit_margin=controls.exit_margin, max_steps=controls.max_steps, peak_rtol=controls.peak_rtol, t_grid=t_grid,
+        )
+        x[:] = xf
+        v[:] = vf
+        return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f

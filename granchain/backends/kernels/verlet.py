@@ -17,24 +17,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._common import (
-    MAX_STEPS,
-    NONFINITE,
-    accelerations,
-    advance_window,
-    final_peaks,
-    initial_force_records,
-    initial_records,
-    initial_window,
-    is_finite_window,
-    is_new_peak,
-    contact_force,
-    end_of_step,
-    final_force_peaks,
-    stop_time,
-    write_info,
-)
-from ._jit import JIT
+from ..._status import MAX_STEPS, NONFINITE
+from .forces import accelerations, contact_force
+from .jit import JIT
+from .peaks import final_force_peaks, final_peaks, initial_force_records, initial_records, is_new_peak, write_info
+from .records import Forces
+from .stop import end_of_step, stop_time
+from .window import advance_window, initial_window, is_finite_window
 
 ORDER = 2
 
@@ -56,33 +45,39 @@ def _hermite_force(j, x_old, v_old, x, v, h, theta, c, n, pw):
 
 
 @njit(**JIT)
-def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid, x, v, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, info):
-    """Fixed-step velocity Verlet; same contract as ``dp5_integrate`` (step h)."""
+def verlet_integrate(h, model, run, state, out):
+    """Fixed-step velocity Verlet with step ``h``; the contract of ``rkloop.rk_integrate`` (``model``,
+    ``run``, ``state``, ``out``: the records of ``records``)."""
+    m, c, n, pw, wall = model
+    x, v = state
+    obs, t_grid, peak_rtol = run.observed, run.t_grid, run.peak_rtol
+    peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
     M = m.shape[0]
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
     inv_m = 1.0 / m
+    fm = Forces(c, inv_m, n, pw)
     a = np.zeros(M)
     a_new = np.zeros(M)
     v_old = np.zeros(M)
     x_old = np.zeros(M)
-    F = np.zeros(M + 1)  # contact forces, F[j + 1] for contact j (see _common.accelerations)
+    F = np.zeros(M + 1)  # contact forces, F[j + 1] for contact j (see forces.accelerations)
     hi = initial_window(x, v)
-    accelerations(x, c, inv_m, n, pw, hi, F, a)
+    accelerations(x, fm, hi, F, a)
     n_eval = 1
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    wall = initial_force_records(x, m, c, n, pw, g, peak_f, peak_ft, grid_f)
+    initial_force_records(x, model, g, out)
     exit_since = -1.0
     n_acc = 0
     status = -1
     while status < 0:
-        if n_acc >= max_steps:
+        if n_acc >= run.max_steps:
             status = MAX_STEPS
             break
         dt = h
-        t_stop = stop_time(t_max, exit_since, exit_margin, t_needed)
+        t_stop = stop_time(run, exit_since, t_needed)
         last = False
         if t + dt >= t_stop:
             dt = t_stop - t
@@ -91,7 +86,7 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
             v_old[i] = v[i]
             x_old[i] = x[i]
             x[i] += dt * v[i] + 0.5 * dt * dt * a[i]
-        accelerations(x, c, inv_m, n, pw, hi, F, a_new)
+        accelerations(x, fm, hi, F, a_new)
         n_eval += 1
         for i in range(hi):
             v[i] += 0.5 * dt * (a[i] + a_new[i])
@@ -132,12 +127,12 @@ def verlet_integrate(m, c, n, pw, obs, h, t_max, stop_at_exit, exit_margin, max_
         new_hi = advance_window(x, v, hi)
         if new_hi > hi:
             hi = new_hi
-            accelerations(x, c, inv_m, n, pw, hi, F, a)
+            accelerations(x, fm, hi, F, a)
             n_eval += 1
-        status, exit_since = end_of_step(x, v, m, hi, t, t_max, stop_at_exit, exit_since, exit_margin, t_needed)
+        status, exit_since = end_of_step(x, v, m, wall, hi, t, run, exit_since, t_needed)
         if status >= 0:
             break
     final_peaks(obs, 0, v, a, t, peak_rtol, peak_v, peak_t)
     final_force_peaks(x, v, c, n, pw, 0, t, peak_rtol, peak_f, peak_ft)
-    write_info(info, t, n_acc, 0, exit_since, n_eval, 0, 0.0)
+    write_info(out.info, t, n_acc, 0, exit_since, n_eval, 0, 0.0)
     return status

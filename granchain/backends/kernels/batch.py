@@ -1,6 +1,6 @@
 """Many realisations in parallel (Numba threads), one single-chain integration each.
 
-Realisation r of a batch is integrated by :func:`~granchain._kernels._dispatch.integrate_chain`,
+Realisation r of a batch is integrated by :func:`~granchain.backends.kernels.dispatch.integrate_chain`,
 the code ``granchain.simulate`` runs, on the same chain arrays: per-realisation results are
 bitwise independent of how realisations are grouped, and equal to ``simulate``.
 
@@ -17,10 +17,12 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from ._aligned import accumulate_aligned
-from ._common import INFO_SIZE, INFO_STEPS, INFO_T_END, SUCCESS, final_energy, has_wall
-from ._dispatch import integrate_chain
-from ._jit import JIT, JIT_PARALLEL
+from ..._status import SUCCESS
+from .aligned import accumulate_aligned
+from .dispatch import integrate_chain
+from .forces import final_energy, impulse_energy
+from .jit import JIT, JIT_PARALLEL
+from .records import INFO_SIZE, INFO_STEPS, INFO_T_END, Model, Outputs, Partials, Run, State
 
 
 @njit(**JIT)
@@ -58,37 +60,46 @@ def gather_forces(peak_f, peak_ft, contacts, wall, force_out, force_time_out, wa
 
 
 def thread_sums(n_threads, T, K, L):
-    """Zeroed per-thread partial sums for :func:`integrate_batch` (acc1, acc2 (n_threads, T, K), accw
-    (n_threads, T), cnt (n_threads,), al1, al2 (n_threads, L, K), all int64).
+    """Zeroed per-thread partial sums for :func:`integrate_batch` (``records.Partials``: sum_v, sum_v2
+    (n_threads, T, K), sum_wall (n_threads, T), n_valid (n_threads,), sum_a, sum_a2 (n_threads, L, K),
+    all int64).
 
     The caller allocates them: allocated inside the parallel kernel, before its ``prange`` loop,
     arrays that the loop writes cost time in proportion to their size for every scheduling chunk
     under dynamic scheduling (``numba.parallel_chunksize``; measured with Numba 0.68: 2.4 ms per
     iteration for two (2, 2686, 101) arrays, nothing when they are arguments; an N = 101 windowed
     realisation took 25.4 instead of 14.8 ms)."""
-    return (np.zeros((n_threads, T, K), dtype=np.int64), np.zeros((n_threads, T, K), dtype=np.int64),
-            np.zeros((n_threads, T), dtype=np.int64), np.zeros(n_threads, dtype=np.int64),
-            np.zeros((n_threads, L, K), dtype=np.int64), np.zeros((n_threads, L, K), dtype=np.int64))
+    return Partials(np.zeros((n_threads, T, K), dtype=np.int64), np.zeros((n_threads, T, K), dtype=np.int64),
+                    np.zeros((n_threads, T), dtype=np.int64), np.zeros(n_threads, dtype=np.int64),
+                    np.zeros((n_threads, L, K), dtype=np.int64), np.zeros((n_threads, L, K), dtype=np.int64))
 
 
 @njit(**JIT_PARALLEL)
-def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, contacts, t_max, exit_margin, max_steps, peak_rtol,
-                    t_grid, scale, peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps,
-                    t_end, sum_v, sum_v2, sum_wall, n_valid, lags, sum_a, sum_a2, acc1, acc2, accw, cnt, al1, al2):
-    """Integrate realisations r = 0..R-1 (rows of ``masses``/``stiffness``/``v_init``, shared ``obs``).
+def integrate_batch(batch, method, run, tally, rows, sums, partials):
+    """Integrate realisations r = 0..R-1 (rows of ``batch``, ``records.Batch``: each struck at granule 1
+    with its ``initial_velocity``) with ``method``, recording what ``run`` asks (its ``t_max``,
+    ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``; the run always stops at the
+    pulse's exit).
 
-    ``kernel``/``params``: the integrator (see ``_dispatch``). Per realisation writes
-    peak_v[r, :], peak_t[r, :], status[r], energy_error[r] ((E_end - E_0)/E_0),
-    n_steps[r], t_end[r], the peak forces of the contacts ``contacts`` (0-based) into peak_f[r, :],
-    peak_ft[r, :] and, for chains ending in a wall, the wall's peak force and time into
-    peak_wall[r, :] (untouched otherwise). Adds round(v * scale) and round(v^2 * scale) of every
-    successful realisation's observed velocities on ``t_grid`` into sum_v / sum_v2
-    (int64, (T, K)), with a wall round(F_wall * scale) into sum_wall (T,), and counts them in n_valid[0].
-    With a non-empty ``lags`` (L,), also adds the aligned pulse's sums (``_aligned``) into
-    sum_a / sum_a2 (int64, (L, K)); with an empty one those stay untouched. ``acc1`` .. ``al2``:
-    zeroed per-thread partial sums from :func:`thread_sums` for numba.get_num_threads() threads
-    (their first axis), added into the sums at the end.
+    Per realisation writes (``rows``, ``records.Rows``) peak_v[r, :], peak_t[r, :], status[r],
+    energy_error[r] ((E_end - E_0)/E_0), n_steps[r], t_end[r], the peak forces of the contacts
+    ``tally.contacts`` (0-based) into peak_f[r, :], peak_ft[r, :] and, for chains ending in a wall, the
+    wall's peak force and time into peak_wall[r, :] (untouched otherwise). Adds (``sums``,
+    ``records.Sums``) round(v * scale) and round(v^2 * scale) of every successful realisation's
+    observed velocities on ``t_grid`` into sum_v / sum_v2 (int64, (T, K)), with a wall
+    round(F_wall * scale) into sum_wall (T,), and counts them in n_valid[0]. With a non-empty
+    ``tally.lags`` (L,), also adds the aligned pulse's sums (``aligned``) into sum_a / sum_a2 (int64,
+    (L, K)); with an empty one those stay untouched. ``partials``: zeroed per-thread partial sums from
+    :func:`thread_sums` for numba.get_num_threads() threads (their first axis), added into ``sums``
+    at the end.
     """
+    masses, stiffness, v_init, n, pw, wall = batch
+    obs, t_grid = run.observed, run.t_grid
+    contacts, scale, lags = tally
+    peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end = rows
+    sum_v, sum_v2, sum_wall, n_valid, sum_a, sum_a2 = sums
+    acc1, acc2, accw, cnt, al1, al2 = partials
+    exit_run = Run(obs, t_grid, run.t_max, True, run.exit_margin, run.max_steps, run.peak_rtol)
     R, M = masses.shape
     K = obs.shape[0]
     T = t_grid.shape[0]
@@ -100,20 +111,19 @@ def integrate_batch(kernel, params, masses, stiffness, n, pw, v_init, obs, conta
         c = stiffness[r]
         x = np.zeros(M)
         v = np.zeros(M)
-        v[0] = v_init[r]
+        v[0] = v_init[r]  # the impulse on granule 1 (granchain.model.Impulse)
         grid_v = np.zeros((T, K))
         pf = np.zeros(M - 1)
         pft = np.zeros(M - 1)
         grid_f = np.zeros(T)
         info = np.zeros(INFO_SIZE)
-        st = integrate_chain(kernel, params, m, c, n, pw, obs, t_max, True, exit_margin, max_steps, peak_rtol,
-                             t_grid, x, v, peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info)
-        wall = has_wall(m)
+        st = integrate_chain(method, Model(m, c, n, pw, wall), exit_run, State(x, v),
+                             Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info))
         gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
         status[r] = st
         n_steps[r] = np.int64(info[INFO_STEPS])
         t_end[r] = info[INFO_T_END]
-        e0 = 0.5 * m[0] * v_init[r] * v_init[r]  # the same expression as Chain.energy
+        e0 = impulse_energy(m[0], v_init[r])
         e1 = final_energy(x, v, m, c, n, info)
         energy_error[r] = (e1 - e0) / e0
         if st == SUCCESS:

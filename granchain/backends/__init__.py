@@ -1,0 +1,117 @@
+"""Backends: what binds an integrator (a value: its settings and capabilities) and a chain (a value:
+masses, stiffnesses, contact law, boundaries, initial state) to code that runs them.
+
+Two backends today:
+
+- ``"numba"`` (:class:`~granchain.backends.numba_backend.NumbaBackend`): the compiled kernels of
+  :mod:`granchain.backends.kernels` for DP5, RKN4 and Verlet, one chain or a parallel batch;
+- ``"scipy"`` (:class:`~granchain.backends.scipy_backend.ScipyBackend`): SciPy's DOP853, the
+  independent reference.
+
+Every integrator names its backend (``Integrator.backend``); :func:`get_backend` returns it. Before a
+run the backend checks that the integrator's capabilities fit the chain's declared assumptions
+(:meth:`Backend.check`): a method that needs conservative forces x'' = f(x) refuses a contact law
+that depends on velocities, and goal-oriented error control (relaxed zone, trailing window) is
+turned off for a chain whose pulse comes back (a rigid wall) and the effective integrator says so
+(:func:`effective_integrator`). The test-suite runs every backend over the same cases
+(``tests/test_backends.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+__all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator"]
+
+
+def effective_integrator(integrator, chain):
+    """The integrator as it actually runs on ``chain``: its goal-oriented zones (relaxed zone, trailing
+    window) switched off when the chain's boundary does not license them (a rigid wall sends the
+    pulse back through the granules behind the front), else ``integrator`` itself."""
+    if getattr(integrator, "goal_oriented", False) and not chain.boundary.licenses_goal_control:
+        return dataclasses.replace(integrator, relaxed_lag=None, window_lag=None)
+    return integrator
+
+
+class Backend:
+    """Runs integrators of one kind of code. Subclasses implement :meth:`integrate`; the batch loop
+    here calls it realisation by realisation with the ensemble's fixed-point sums (compiled backends
+    override it with a parallel kernel)."""
+
+    name: str = ""
+
+    def check(self, integrator, chain) -> None:
+        """Refuse an integrator whose requirements the chain's model does not meet (with what to change)."""
+        if integrator.needs_conservative_forces and not chain.contact.conservative:
+            raise ValueError(f"{integrator.name} integrates x'' = f(x) and needs forces that depend on positions only; "
+                             f"the contact law {chain.contact!r} depends on velocities: use DP5 or DOP853")
+
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls):
+        """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state); returns
+        (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f) (see ``Integrator.integrate``)."""
+        raise NotImplementedError
+
+    def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
+                        controls, scale: float, out: dict) -> None:
+        """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time."""
+        from .._chain import Chain
+        from .kernels.aligned import accumulate_aligned
+        from .kernels.batch import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces
+        from .kernels.forces import final_energy, impulse_energy
+        from .kernels.records import INFO_STEPS, INFO_T_END
+
+        R, M = masses.shape
+        wall = bool(np.isinf(masses[0, -1]))
+        for r in range(R):
+            chain = Chain(masses[r], stiffness[r], n, initial_velocity[r], observed)
+            x, v = np.zeros(M), np.zeros(M)
+            v[0] = initial_velocity[r]
+            st, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = self.integrate(
+                integrator, chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=True, controls=controls)
+            out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
+            gather_forces(peak_f, peak_ft, contacts, wall, out["peak_force"][r], out["peak_force_time"][r], out["peak_wall"][r])
+            out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]
+            e0 = impulse_energy(masses[r, 0], initial_velocity[r])
+            out["energy_error"][r] = (final_energy(x, v, masses[r], stiffness[r], n, info) - e0) / e0
+            if st == 0:
+                out["n_valid"][0] += 1
+                accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])
+                if wall:
+                    accumulate_fixed_point_1d(grid_f, scale, out["sum_wall"])
+                lags, sum_a, sum_a2 = aligned_outputs(out, len(observed))
+                accumulate_aligned(t_grid, np.ascontiguousarray(grid_v), np.asarray(peak_t, dtype=float), lags, scale,
+                                   sum_a, sum_a2)
+
+    def __repr__(self) -> str:
+        return f"<granchain backend {self.name!r}>"
+
+
+def aligned_outputs(out: dict, n_observed: int):
+    """(lags, sum_a, sum_a2) of ``out`` for the aligned pulse (``kernels.aligned``); an empty
+    lag grid (no aligned pulse asked) when ``out`` has no ``"lags"``."""
+    if out.get("lags") is None:
+        empty = np.zeros((0, n_observed), dtype=np.int64)
+        return np.zeros(0), empty, empty.copy()
+    return np.asarray(out["lags"], dtype=float), out["sum_a"], out["sum_a2"]
+
+
+_BACKENDS: dict = {}
+
+
+def get_backend(name: str) -> Backend:
+    """The backend registered as ``name`` ("numba" or "scipy"), imported on first use."""
+    if name not in _BACKENDS:
+        if name == "numba":
+            from .numba_backend import NumbaBackend as cls
+        elif name == "scipy":
+            from .scipy_backend import ScipyBackend as cls
+        else:
+            raise ValueError(f"unknown backend {name!r}; choose one of {sorted(BACKENDS)}")
+        _BACKENDS[name] = cls()
+    return _BACKENDS[name]
+
+
+#: The backends by name.
+BACKENDS = ("numba", "scipy")

@@ -1,0 +1,140 @@
+"""Dense output of the Runge-Kutta step loop, and the roots found on it.
+
+Peaks of the observed granules are located between steps: a local maximum of v_k lies where its
+acceleration changes sign from + to -, and the root of the acceleration computed from the
+dense-output positions is found by the Illinois method, so peak times are not tied to the step
+grid. Peak contact forces the same way: contact j's compression peaks where the dense-output
+relative velocity v_j - v_{j+1} changes sign from + to -; the force there is c_j delta^(n-1) of the
+dense-output positions (Eq. motion_rescaled).
+
+Both methods evaluate their dense output as y + h sum_s K[s] Q[s] with their own weights Q: DP5's
+continuous extension (``dp5.dense_weights``, one set for positions and velocities) or RKN4's
+quintic Hermite pair (``rkn4.hermite_weights``).
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+from . import dp5, rkn4
+from .forces import contact_force
+from .jit import JIT, JIT_INLINE
+from .records import KIND_RKN4
+
+#: What :func:`first_root` follows across a step: the acceleration of a granule (its velocity
+#: maximum) or the relative velocity of a contact (its compression, i.e. force, maximum).
+ROOT_ACCELERATION = 0
+ROOT_APPROACH = 1
+
+
+@njit(**JIT)
+def weights(method, theta, Qx, Qv):
+    """Dense-output weights at t + theta h: positions x + h sum_s Kx[s] Qx[s], velocities
+    v + h sum_s Kv[s] Qv[s]. DP5 has one set (``Qv`` is ``Qx``: filled once); RKN4 its Hermite pair
+    (``rkn4.hermite_weights``)."""
+    if method == KIND_RKN4:
+        rkn4.hermite_weights(theta, Qx, Qv)
+    else:
+        dp5.dense_weights(theta, Qx)
+
+
+@njit(**JIT)
+def dense_value(y0, K, k, h, Q):
+    """y_k(t + theta h) = y0 + h sum_s K[s, k] Q[s], Q the weights at theta (:func:`weights`)."""
+    acc = 0.0
+    for s in range(7):
+        acc += K[s, k] * Q[s]
+    return y0 + h * acc
+
+
+@njit(**JIT)
+def dense_compression(j, x, Kx, h, Q):
+    """Compression x_j - x_{j+1} of contact j from the dense-output positions at the time whose
+    weights ``Q`` holds (:func:`weights` already called)."""
+    return dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
+
+
+@njit(**JIT)
+def dense_acceleration(method, theta, k, step, fm, Q, Qv):
+    """Acceleration of granule k at t + theta h from the dense-output positions of ``step``
+    (``records.Dense``), forces from ``fm`` (``records.Forces``)."""
+    x, _, Kx, _, h = step
+    c, inv_m, n, pw = fm
+    M = x.shape[0]
+    weights(method, theta, Q, Qv)
+    xk = dense_value(x[k], Kx, k, h, Q)
+    left = 0.0
+    right = 0.0
+    if k > 0:
+        left = contact_force(dense_value(x[k - 1], Kx, k - 1, h, Q) - xk, c[k - 1], n, pw)
+    if k < M - 1:
+        right = contact_force(xk - dense_value(x[k + 1], Kx, k + 1, h, Q), c[k], n, pw)
+    return (left - right) * inv_m[k]
+
+
+@njit(**JIT)
+def root_function(method, what, i, theta, step, fm, Q, Qv):
+    """The followed function at t + theta h on the dense output (weights ``Q`` for positions, ``Qv``
+    for velocities, see :func:`weights`): the acceleration of granule i, or the relative velocity
+    v_i - v_{i+1} of contact i."""
+    if what == ROOT_ACCELERATION:
+        return dense_acceleration(method, theta, i, step, fm, Q, Qv)
+    _, v, _, Kv, h = step
+    weights(method, theta, Q, Qv)
+    return dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
+
+
+@njit(**JIT)
+def first_root(method, what, i, f01, step, fm, Q, Qv):
+    """First theta in [0, 1] where the followed function (f01 = its values (+ at 0, <= 0 at 1)) stops
+    being positive: a granule's velocity maximum (``ROOT_ACCELERATION``) or a contact's compression
+    maximum (``ROOT_APPROACH``).
+
+    Illinois (modified regula falsi) while the bracket has a strictly negative end; bisection
+    while it ends on an exact zero (a contact that opened: the acceleration is then zero on a
+    whole interval and the first zero is wanted).
+    """
+    lo, hi = 0.0, 1.0
+    f_lo, f_hi = f01
+    theta = 0.0
+    side = 0
+    for _ in range(200):
+        if f_hi < 0.0:
+            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            if not (lo < theta < hi):
+                theta = 0.5 * (lo + hi)
+        else:
+            theta = 0.5 * (lo + hi)
+        f = root_function(method, what, i, theta, step, fm, Q, Qv)
+        if f > 0.0:
+            lo, f_lo = theta, f
+            if side == -1:
+                f_hi *= 0.5
+            side = -1
+        else:
+            hi, f_hi = theta, f
+            if side == 1:
+                f_lo *= 0.5
+            side = 1
+        if hi - lo < 1e-14:
+            break
+    return hi
+
+
+@njit(**JIT_INLINE)
+def falls(f0, f1):
+    """A function followed over a step is + at its start and <= 0 at its end: a maximum of what it
+    is the derivative of lies inside (:func:`first_root`). Branch-free, so that the candidate
+    counts of the step loop vectorise; the same test in the counts and in the loops they guard."""
+    return (f0 > 0.0) & (f1 <= 0.0)
+
+
+@njit(**JIT)
+def hermite_max_estimate(d0, w0, d1, w1, h):
+    """The cubic Hermite interpolant of the compression through (d0, w0) and (d1, w1) over a step h,
+    at the zero of the linearly interpolated relative velocity w (w0 > 0 >= w1): an estimate of the
+    compression maximum, used only to skip hopeless root searches (``rkloop.SCREEN``)."""
+    theta = w0 / (w0 - w1)
+    t2 = theta * theta
+    t3 = t2 * theta
+    return (2 * t3 - 3 * t2 + 1) * d0 + (t3 - 2 * t2 + theta) * h * w0 + (-2 * t3 + 3 * t2) * d1 + (t3 - t2) * h * w1

@@ -1,0 +1,108 @@
+"""Dormand-Prince 5(4): the tableau, the stages, the error estimate and the dense output.
+
+Coefficients: J. R. Dormand and P. J. Prince, J. Comput. Appl. Math. 6, 19 (1980); continuous
+extension of order 4 from L. F. Shampine, Math. Comp. 46, 135 (1986) (the same tables as
+``scipy.integrate.RK45``). The step loop that runs them is ``rkloop``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .forces import accelerations
+from .jit import JIT, JIT_INLINE
+
+ORDER = 5
+
+# Butcher tableau (rows: stages 2..6; stage 7 is the solution, FSAL).
+A = np.array(
+    [
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [1 / 5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [3 / 40, 9 / 40, 0.0, 0.0, 0.0, 0.0],
+        [44 / 45, -56 / 15, 32 / 9, 0.0, 0.0, 0.0],
+        [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0.0, 0.0],
+        [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656, 0.0],
+        [35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84],
+    ]
+)
+# Error weights: (5th-order - 4th-order embedded) solution, over stages 1..7.
+E = np.array([-71 / 57600, 0.0, 71 / 16695, -71 / 1920, 17253 / 339200, -22 / 525, 1 / 40])
+# Dense output: y(t + theta h) = y + h sum_s K_s sum_p P[s, p] theta^(p+1).
+P = np.array(
+    [
+        [1.0, -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432],
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0, 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799],
+        [0.0, -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072],
+        [0.0, 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632],
+        [0.0, -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844],
+        [0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423],
+    ]
+)
+
+
+@njit(**JIT)
+def dense_weights(theta, Q):
+    """Q[s] = sum_p P[s, p] theta^(p+1), so that y(theta) = y + h sum_s K_s Q[s]."""
+    for s in range(7):
+        Q[s] = theta * (P[s, 0] + theta * (P[s, 1] + theta * (P[s, 2] + theta * P[s, 3])))
+
+
+# Coefficients as scalars so that Numba folds them into the unrolled stages.
+A21 = A[1, 0]
+A31, A32 = A[2, 0], A[2, 1]
+A41, A42, A43 = A[3, 0], A[3, 1], A[3, 2]
+A51, A52, A53, A54 = A[4, 0], A[4, 1], A[4, 2], A[4, 3]
+A61, A62, A63, A64, A65 = A[5, 0], A[5, 1], A[5, 2], A[5, 3], A[5, 4]
+B1, B3, B4, B5, B6 = A[6, 0], A[6, 2], A[6, 3], A[6, 4], A[6, 5]
+E1, E3, E4, E5, E6, E7 = E[0], E[2], E[3], E[4], E[5], E[6]
+
+
+@njit(**JIT_INLINE)
+def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F):
+    """Stages 2..7 of one step over granules 0..hi-1, unrolled.
+
+    Kx[s] are the stage velocities (dx/dt), Kv[s] the stage accelerations;
+    ``fm``: the forces' parameters (``records.Forces``). On return xs, vs hold the 5th-order solution and Kx[6], Kv[6] its derivative.
+    """
+    for i in range(hi):
+        xs[i] = x[i] + h * (A21 * Kx[0, i])
+        Kx[1, i] = v[i] + h * (A21 * Kv[0, i])
+    accelerations(xs, fm, hi, F, Kv[1])
+    for i in range(hi):
+        xs[i] = x[i] + h * (A31 * Kx[0, i] + A32 * Kx[1, i])
+        Kx[2, i] = v[i] + h * (A31 * Kv[0, i] + A32 * Kv[1, i])
+    accelerations(xs, fm, hi, F, Kv[2])
+    for i in range(hi):
+        xs[i] = x[i] + h * (A41 * Kx[0, i] + A42 * Kx[1, i] + A43 * Kx[2, i])
+        Kx[3, i] = v[i] + h * (A41 * Kv[0, i] + A42 * Kv[1, i] + A43 * Kv[2, i])
+    accelerations(xs, fm, hi, F, Kv[3])
+    for i in range(hi):
+        xs[i] = x[i] + h * (A51 * Kx[0, i] + A52 * Kx[1, i] + A53 * Kx[2, i] + A54 * Kx[3, i])
+        Kx[4, i] = v[i] + h * (A51 * Kv[0, i] + A52 * Kv[1, i] + A53 * Kv[2, i] + A54 * Kv[3, i])
+    accelerations(xs, fm, hi, F, Kv[4])
+    for i in range(hi):
+        xs[i] = x[i] + h * (A61 * Kx[0, i] + A62 * Kx[1, i] + A63 * Kx[2, i] + A64 * Kx[3, i] + A65 * Kx[4, i])
+        Kx[5, i] = v[i] + h * (A61 * Kv[0, i] + A62 * Kv[1, i] + A63 * Kv[2, i] + A64 * Kv[3, i] + A65 * Kv[4, i])
+    accelerations(xs, fm, hi, F, Kv[5])
+    for i in range(hi):
+        xs[i] = x[i] + h * (B1 * Kx[0, i] + B3 * Kx[2, i] + B4 * Kx[3, i] + B5 * Kx[4, i] + B6 * Kx[5, i])
+        vs[i] = v[i] + h * (B1 * Kv[0, i] + B3 * Kv[2, i] + B4 * Kv[3, i] + B5 * Kv[4, i] + B6 * Kv[5, i])
+        Kx[6, i] = vs[i]
+    accelerations(xs, fm, hi, F, Kv[6])
+
+
+@njit(**JIT_INLINE)
+def error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
+    """DP5's error ratios of positions (ratio[0:hi]) and velocities (ratio[hi:2 hi]), see ``rkloop.error_norm``."""
+    for i in range(hi):  # positions, then velocities: two loops of few streams each vectorise
+        w = factor if i < relaxed else 1.0
+        ex = h * (E1 * Kx[0, i] + E3 * Kx[2, i] + E4 * Kx[3, i] + E5 * Kx[4, i] + E6 * Kx[5, i] + E7 * Kx[6, i])
+        ratio[i] = abs(ex) / ((atol + rtol * max(abs(x[i]), abs(xs[i]))) * w)
+    rv = ratio[hi:]
+    for i in range(hi):
+        w = factor if i < relaxed else 1.0
+        ev = h * (E1 * Kv[0, i] + E3 * Kv[2, i] + E4 * Kv[3, i] + E5 * Kv[4, i] + E6 * Kv[5, i] + E7 * Kv[6, i])
+        rv[i] = abs(ev) / ((atol + rtol * max(abs(v[i]), abs(vs[i]))) * w)

@@ -1,0 +1,91 @@
+"""The grouped records the kernels take, instead of long lists of positional arguments.
+
+A kernel entry point takes a handful of these (Numba compiles a named tuple into a struct whose
+fields it reads directly, at no cost over separate arguments): a new model parameter is one more
+field here and in the Python code that fills it (``granchain.backends.numba_backend``), not one more
+argument in every signature between them. ``tests/test_backends.py`` counts the positional
+arguments of every compiled entry point and checks that a field added to :data:`Model` reaches the
+kernel with no other change.
+
+Arrays are float64 and C-contiguous unless said otherwise; indices 0-based.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+#: One chain as the kernels see it (Eq. motion_rescaled). ``masses`` (M,), the last ``inf`` for a
+#: rigid wall; ``stiffness`` (M-1,), the prefactors c_k; ``n`` the exponent of the power-law contact;
+#: ``power`` its fast-path code (``forces.power_code``); ``wall`` whether the far end is a rigid wall
+#: (the boundary value of the chain, ``granchain.model.RigidWall``: asked here once, not re-derived
+#: from the infinite mass).
+Model = namedtuple("Model", ["masses", "stiffness", "n", "power", "wall"])
+
+#: A batch of chains of one size for the ensemble kernel: ``masses`` (R, M), ``stiffness`` (R, M-1),
+#: ``initial_velocity`` (R,) (the impulse on granule 1 of each row), the shared ``n``, ``power``,
+#: ``wall``.
+Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "n", "power", "wall"])
+
+#: The integration method: ``kind`` (``dispatch.KIND_*``) and its settings ``params`` (float64,
+#: laid out by the kind: see ``dispatch.integrate_chain``).
+Method = namedtuple("Method", ["kind", "params"])
+
+#: The step control of the Runge-Kutta loop (``rkloop``), unpacked from a :data:`Method`'s params.
+#: ``fixed_step`` > 0 turns the control off; the goal-oriented zones are off when their lags are 0.
+Steps = namedtuple("Steps", ["rtol", "atol", "first_step", "fixed_step", "relaxed_lag", "relaxed_factor", "window_lag"])
+
+#: What to record and when to stop: the ``observed`` granules (int64, (K,)), the ``t_grid`` (T,)
+#: on which their velocities are sampled, the hard limit ``t_max``, whether to stop
+#: ``exit_margin`` after the pulse has left (``stop_at_exit``), the step budget ``max_steps`` and the
+#: tie rule of peaks ``peak_rtol`` (``peaks.is_new_peak``).
+Run = namedtuple("Run", ["observed", "t_grid", "t_max", "stop_at_exit", "exit_margin", "max_steps", "peak_rtol"])
+
+#: The state (x, v) of the M granules: the initial state on entry, the final one on return.
+State = namedtuple("State", ["x", "v"])
+
+#: What one integration records: per observed granule its peak velocity and time (K,), its
+#: velocities on the grid ``grid_v`` (T, K, time-major); per contact its peak force and time (M-1,);
+#: the wall force on the grid ``grid_f`` (T,; with a wall); the run's ``info`` (INFO_SIZE,).
+Outputs = namedtuple("Outputs", ["peak_v", "peak_t", "grid_v", "peak_f", "peak_ft", "grid_f", "info"])
+
+#: What the ensemble kernel records per realisation r (rows): peak velocity and time (R, K), the
+#: recorded contacts' peak force and time (R, C), the wall's peak force and time (R, 2), the status,
+#: the relative energy error, the accepted steps and the end time (R,).
+Rows = namedtuple("Rows", ["peak_v", "peak_t", "peak_f", "peak_ft", "peak_wall", "status", "energy_error", "n_steps",
+                           "t_end"])
+
+#: The ensemble kernel's fixed-point sums (int64): of the grid velocities and their squares (T, K), of
+#: the wall force (T,), the count of successful realisations (1,), and of the aligned pulse (L, K).
+Sums = namedtuple("Sums", ["sum_v", "sum_v2", "sum_wall", "n_valid", "sum_a", "sum_a2"])
+
+#: What the ensemble kernel needs besides the chains: the recorded ``contacts`` (int64, (C,)), the
+#: fixed-point ``scale`` (2^bits) and the aligned pulse's ``lags`` (L,; empty: none).
+Tally = namedtuple("Tally", ["contacts", "scale", "lags"])
+
+#: The per-thread partial sums of :data:`Sums` (first axis: thread), allocated by the caller
+#: (``batch.thread_sums``).
+Partials = namedtuple("Partials", ["sum_v", "sum_v2", "sum_wall", "n_valid", "sum_a", "sum_a2"])
+
+#: What a force evaluation reads, as views from the window's first granule on: the contact
+#: prefactors, the inverse masses (0 for a wall and for padding), the exponent and its fast-path code.
+Forces = namedtuple("Forces", ["stiffness", "inv_mass", "n", "power"])
+
+# Slots of the ``info`` array every single-chain kernel fills.
+INFO_T_END = 0  # time the run stopped
+INFO_STEPS = 1  # accepted steps
+INFO_REJECTED = 2  # rejected steps
+INFO_EXIT = 3  # time the pulse left the last granule (-1: it did not)
+INFO_EVALUATIONS = 4  # force evaluations (whole-window sweeps)
+INFO_WINDOW_START = 5  # first granule still integrated at the end (0-based; > 0 only with a trailing window)
+INFO_FROZEN_POTENTIAL = 6  # potential energy of the contacts behind the window when they left it
+INFO_SIZE = 7
+
+# Method kinds (``Method.kind``): one id per compiled method, the only place it is numbered.
+KIND_DP5 = 0
+KIND_VERLET = 1
+KIND_RKN4 = 2
+
+#: An accepted Runge-Kutta step's dense output, as views from the window's first granule on: the
+#: state at the step's start (x, v), the stage slots Kx, Kv (7, Mp) that ``dp5``/``rkn4`` fill,
+#: and the step h. Its values at t + theta h are y + h sum_s K[s] Q[s] (``dense.dense_value``).
+Dense = namedtuple("Dense", ["x", "v", "Kx", "Kv", "h"])

@@ -1,0 +1,398 @@
+"""The adaptive Runge-Kutta step loop shared by DP5 (``dp5``) and RKN4(3) (``rkn4``): PI step
+control, max-norm error, the active and trailing windows, peaks and grid samples from the dense
+output (``dense``), the stop rule (``stop``).
+
+Step control: the PI controller of Hairer, Norsett & Wanner, *Solving ODEs I*, Sec. II.4 (DOPRI5).
+The error norm is the maximum over components: the pulse is localised, and a root-mean-square norm
+would dilute its error over the resting granules.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from . import dp5, rkn4
+from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW
+from .dense import (ROOT_ACCELERATION, ROOT_APPROACH, dense_compression, dense_value, falls, first_root,
+                    hermite_max_estimate, weights)
+from .forces import accelerations, add_potential, contact_force
+from .jit import JIT, JIT_INLINE
+from .memory import borrowed, keep_alive
+from .peaks import final_force_peaks, final_peaks, initial_force_records, initial_records, is_new_peak, write_info
+from .records import KIND_DP5, KIND_RKN4, Dense, Forces, Model, Outputs, Run, State
+from .stop import end_of_step, stop_time
+from .window import advance_window, initial_window, is_finite_window, open_contact_behind
+
+SAFETY = 0.9
+#: Contact-force screen: the root of a compression maximum is searched only if the Hermite
+#: estimate of that maximum reaches this fraction of the contact's recorded peak compression.
+SCREEN = 0.9
+BETA = 0.08  # PI controller: Gustafsson's value, few rejections when stability limits the step
+ALPHA = 0.2 - 0.75 * BETA  # error estimate O(h^5)
+ALPHA_RKN4 = 0.25 - 0.75 * BETA  # RKN4(3): error estimate O(h^4)
+MIN_FACTOR = 0.2
+MAX_FACTOR = 10.0
+#: Bit masks of a float64 (:func:`error_norm`): all but the sign; the exponent of inf and NaN.
+SIGN_CLEAR = 0x7FFF_FFFF_FFFF_FFFF
+EXPONENT_ALL_ONES = 0x7FF0_0000_0000_0000
+#: The padded layout: the loops over the window (stages, error norm, update) run
+#: to the next multiple of LANES past its end. LLVM vectorises them LANES doubles wide (AVX-512) and
+#: finishes a loop whose length is not a multiple of that one element at a time, which cost a step
+#: as much as the vector part (the six stages: ~460 ns for a window of 31 granules, ~290 ns for 32).
+#: The granules between the window's end and that multiple are exactly at rest and uncompressed
+#: (``window.WINDOW_MARGIN``) or padding past the chain's end (zero stiffness, zero inverse mass):
+#: every stage gives them exact zeros, so the results are bitwise those of the unpadded loops.
+LANES = 8
+
+
+@njit(**JIT_INLINE)
+def padded_width(hw):
+    """The loop length for a window of ``hw`` granules: ``hw`` rounded up to a multiple of LANES."""
+    return (hw + LANES - 1) // LANES * LANES
+
+
+@njit(**JIT_INLINE)
+def error_norm(method, x, v, xs, vs, Kx, Kv, h, hi, relaxed, steps, ratio):
+    """Max over components of |embedded error| / (w_i (atol + rtol max(|y|, |y_new|))); inf if the new
+    state is not finite. w_i = ``steps.relaxed_factor`` for the granules of the relaxed zone
+    (0..relaxed-1), else 1 (multiplying by 1 is exact: without a relaxed zone the norm is bitwise the
+    plain one). The ratios come from ``dp5.error_ratios`` or ``rkn4.error_ratios``.
+
+    The ratios go through the scratch array ``ratio`` so that the division loop vectorises; their
+    maximum is then an integer maximum of their bit patterns (below; ``ratio[0]`` is overwritten with
+    it). A NaN ratio (a non-finite state) is never lost to a later finite one: its pattern is above
+    every finite one.
+    """
+    factor, rtol, atol = steps.relaxed_factor, steps.rtol, steps.atol
+    if method == KIND_RKN4:
+        rkn4.error_ratios(x, v, xs, vs, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
+    else:
+        dp5.error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
+    # The maximum of the bit patterns (sign cleared): for non-negative doubles their order is the
+    # order of the numbers, inf and NaN above every finite one, and an integer maximum can vectorise
+    # (a floating-point one cannot without fast-math; measured, no faster than the float loop it
+    # replaced, but simpler). Bitwise the same maximum.
+    bits = ratio.view(np.int64)
+    top = 0
+    for i in range(2 * hi):
+        top = max(top, bits[i] & SIGN_CLEAR)
+    if top >= EXPONENT_ALL_ONES:  # inf or NaN
+        return math.inf
+    bits[0] = top
+    return ratio[0]
+
+
+@njit(**JIT)
+def rk_integrate(method, steps, model, run, state, out):
+    """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
+    final state) with ``method`` (``KIND_DP5``, or ``KIND_RKN4``: the Runge-Kutta-Nystrom pair of
+    ``rkn4``, same loop, step control and records) and its step control ``steps``
+    (``records.Steps``), recording into ``out`` (``records.Outputs``) what ``run`` asks
+    (``records.Run``).
+
+    For each observed granule q (0-based index run.observed[q]) the kernel writes the maximum
+    velocity ``peak_v[q]`` and its time ``peak_t[q]`` (see ``peaks.is_new_peak`` for ties), and the
+    velocity at each time t_grid[g] into ``grid_v[g, q]`` (time-major: one contiguous row per grid
+    time). For each contact j (0-based, M-1 of them) it writes the maximum contact force
+    ``peak_f[j]`` and its time ``peak_ft[j]`` (0 at t = 0 for a contact that never closed; same tie
+    rule as the velocities); with a wall (``model.wall``) ``grid_f[g]`` receives the wall force at
+    t_grid[g] (untouched otherwise). ``steps.fixed_step > 0`` turns step control off. With
+    ``run.stop_at_exit`` the run ends ``exit_margin`` after the pulse has left the last granule (and
+    not before t_grid[-1]); otherwise at ``t_max``.
+
+    Goal-oriented error control (``granchain.DP5``; off when the lags are 0; the Python layer sets
+    them to 0 for a chain ending in a wall, whose pulse comes back, and says so in its records). The
+    *front* is the most advanced observed granule whose velocity maximum has been located; it never
+    moves backwards.
+    - ``relaxed_lag`` > 0: granules behind observed granule front - relaxed_lag enter the error norm
+      with tolerances ``relaxed_factor`` times looser (the relaxed zone).
+    - ``window_lag`` > 0: granules behind observed granule front - window_lag, cut across the
+      last contact behind it that is open at that moment, leave the integration (the trailing
+      window): they keep their velocity (positions continue ballistically), their peaks are final,
+      and the contact at the window's edge is dropped. Granules lo..M-1 stay integrated, so the
+      work per step is bounded by the window, not the chain.
+
+    ``out.info`` receives the INFO_* slots of ``records`` (t_end, steps, rejected, exit time, force
+    evaluations, window start, potential energy of the frozen contacts). Returns the status code
+    (``granchain._status``).
+    """
+    m, c, n, pw, wall = model
+    x, v = state
+    M = m.shape[0]
+    # The padded layout (see LANES): state, stiffness and inverse masses of the M granules followed
+    # by LANES padding granules with zero stiffness and zero inverse mass, which stay exactly at rest.
+    Mp = M + LANES
+    xp = np.zeros(Mp)
+    vp = np.zeros(Mp)
+    cp = np.zeros(Mp)
+    inv_m = np.zeros(Mp)
+    xp[:M] = x
+    vp[:M] = v
+    cp[:M - 1] = c
+    inv_m[:M] = 1.0 / m
+    Kx = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
+    Kv = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
+    xs = np.zeros(Mp)
+    vs = np.zeros(Mp)
+    F = np.zeros(Mp + 1)  # contact forces, F[j + 1] for contact j (see forces.accelerations)
+    Q = np.zeros(7)
+    Qv = np.zeros(7)  # RKN4's velocity weights (DP5 uses Q for both)
+    ratio = np.zeros(2 * Mp)
+    peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
+    t_frozen = np.zeros(M)  # time each granule left the trailing window
+    # The step loop works on borrowed views (see memory.borrowed): the arguments are held by
+    # our caller, the scratch arrays above by the keep_alive call after the loop.
+    bmodel = Model(borrowed(m), borrowed(cp), n, pw, wall)
+    brun = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin,
+               run.max_steps, run.peak_rtol)
+    bstate = State(borrowed(xp), borrowed(vp))
+    bout = Outputs(borrowed(out.peak_v), borrowed(out.peak_t), borrowed(out.grid_v), borrowed(out.peak_f),
+                   borrowed(out.peak_ft), borrowed(out.grid_f), borrowed(out.info))
+    scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
+               borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
+    if method == KIND_RKN4:
+        status = _rkn4_loop(steps, bmodel, brun, bstate, bout, scratch)
+    else:
+        status = _dp5_loop(steps, bmodel, brun, bstate, bout, scratch)
+    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen)
+    x[:] = xp[:M]
+    v[:] = vp[:M]
+    return status
+
+
+@njit(**JIT)
+def _dp5_loop(steps, model, run, state, out, scratch):
+    """:func:`_rk_loop` with DP5."""
+    return _rk_loop(KIND_DP5, steps, model, run, state, out, scratch)
+
+
+@njit(**JIT)
+def _rkn4_loop(steps, model, run, state, out, scratch):
+    """:func:`_rk_loop` with RKN4(3)."""
+    return _rk_loop(KIND_RKN4, steps, model, run, state, out, scratch)
+
+
+# Inlined into the two loops above, each with its method a constant, so that the compiler drops the
+# other method's branches (compiled once with the method a run-time value, the loop cost DP5 ~6 %
+# more per realisation, same-process timing at N = 26).
+@njit(**JIT_INLINE)
+def _rk_loop(method, steps, model, run, state, out, scratch):
+    """The step loop of :func:`rk_integrate`, on borrowed arrays (``memory.borrowed``: no reference
+    counting in the loop): its records, with the state (x, v), the stiffness and the inverse masses
+    ``inv_m`` = 1 / m in the padded layout (length Mp = M + LANES, see :data:`LANES`), and the zeroed
+    scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``, ``vs`` (Mp); ``peak_d``,
+    ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); error
+    ratios ``ratio`` (2 Mp)) in the tuple ``scratch``."""
+    inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen = scratch
+    m, c, n, pw, wall = model
+    x, v = state
+    obs, t_grid = run.observed, run.t_grid
+    peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
+    peak_rtol = run.peak_rtol
+    h_fixed, relax_lag, window_lag = steps.fixed_step, steps.relaxed_lag, steps.window_lag
+    M = m.shape[0]
+    Mp = x.shape[0]
+    n_obs = obs.shape[0]
+    n_grid = t_grid.shape[0]
+
+    # The window: granules lo..hi-1 are integrated (lo = 0 until a trailing-window cut). Kx, Kv are
+    # window-local (shifted to start at lo at each cut); the other arrays are read through views from
+    # granule lo on, taken in the step loop below.
+    QV = Qv if method == KIND_RKN4 else Q  # velocity weights (see dense.weights)
+    alpha = ALPHA_RKN4 if method == KIND_RKN4 else ALPHA  # PI controller exponent of the error estimate
+    goal = relax_lag > 0 or window_lag > 0
+    lo = 0
+    hi = initial_window(x[:M], v[:M])
+    accelerations(x, Forces(c, inv_m, n, pw), hi, F, Kv[0])
+    for i in range(hi):
+        Kx[0, i] = v[i]
+    n_eval = 1
+    front = -1  # observed granule (index into obs) of the front
+    relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
+    frozen_potential = 0.0
+
+    t = 0.0
+    g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
+    t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
+    initial_force_records(x[:M], model, g, out)
+
+    h = h_fixed if h_fixed > 0.0 else steps.first_step
+    err_old = 1e-4
+    exit_since = -1.0
+    n_acc = 0
+    n_rej = 0
+    status = -1
+    # Two loops: the outer one takes views of the window (from granule lo on) that the steps of the
+    # inner one do not move; a trailing-window cut ends the inner loop after its step. Views that
+    # stay put through the step loop are loop invariants to the compiler: when they were moved
+    # inside it, a step cost 15-20 % more on N = 6 and 10-15 % more on N = 26 decorated chains
+    # (~410 -> ~350 ns and ~750 -> ~670 ns, exact DP5, same-process timings), window or not.
+    while status < 0:
+        # Views from granule lo on (contiguous, so the stage loops vectorise): X, V, C, IM, XS, VS
+        # through the padding (the loops over the window), XM, VM, MM to the chain's end (the
+        # routines that look for its last granule).
+        X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
+        XS, VS = xs[lo:], vs[lo:]
+        XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
+        FM = Forces(C, IM, n, pw)
+        while status < 0:
+            if n_acc + n_rej >= run.max_steps:
+                status = MAX_STEPS
+                break
+            # Land exactly on the end: t_max, or exit_margin after the pulse left (not before t_grid[-1]).
+            t_stop = stop_time(run, exit_since, t_needed)
+            last = False
+            if t + h >= t_stop:
+                h = t_stop - t
+                last = True
+            hw = hi - lo
+            hp = padded_width(hw)
+            # The stages (DP5: 2..7, RKN4: 1..3; the last is the new solution's, reused as the first
+            # next step).
+            if method == KIND_RKN4:
+                rkn4.stages(X, V, Kv, XS, VS, h, hp, FM, F)
+                n_eval += 3
+            else:
+                dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F)
+                n_eval += 6
+            # xs, vs now hold the new solution at t + h (DP5: 5th order; RKN4: 4th order).
+            accept = True
+            err = 0.0
+            if h_fixed <= 0.0:
+                err = error_norm(method, X, V, XS, VS, Kx, Kv, h, hp, relaxed, steps, ratio)
+                if not math.isfinite(err):
+                    status = NONFINITE
+                    break
+                accept = err <= 1.0
+            if not accept:
+                n_rej += 1
+                h *= max(MIN_FACTOR, SAFETY * err**-alpha)
+                if h < 1e-14 * max(1.0, t):
+                    status = STEP_UNDERFLOW
+                continue
+
+            # Accepted: peaks and grid samples from the dense output over [t, t + h].
+            if method == KIND_RKN4:
+                rkn4.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+            step = Dense(X, V, Kx, Kv, h)
+            # Velocity maxima where an acceleration goes from + to -: a vectorised count over every
+            # granule of the window (zeros past it) first; the loop over the observed granules runs
+            # only when it finds one (1.6 % of the steps of an N = 26 decorated chain have one there).
+            n_candidates = 0
+            for i in range(hp):
+                n_candidates += falls(Kv[0, i], Kv[6, i])
+            for q in range(n_obs if n_candidates > 0 else 0):
+                k = obs[q] - lo
+                if k < 0 or k >= hw:
+                    continue
+                a0 = Kv[0, k]
+                a1 = Kv[6, k]
+                if falls(a0, a1):
+                    theta = first_root(method, ROOT_ACCELERATION, k, (a0, a1), step, FM, Q, QV)
+                    weights(method, theta, Q, QV)
+                    vpk = dense_value(V[k], Kv, k, h, QV)
+                    if is_new_peak(vpk, peak_v[q], peak_rtol):
+                        peak_v[q] = vpk
+                        peak_t[q] = t + theta * h
+                    front = max(front, q)
+            # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -. The same
+            # vectorised count first (~80 % of the steps of an N = 26 decorated chain have no
+            # candidate; the contacts past the window, resting or padding, are never one, except the
+            # padding's with the last granule, which only lets the loop run).
+            # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
+            n_candidates = 0
+            for j in range(hp):
+                n_candidates += falls(Kx[0, j] - Kx[0, j + 1], Kx[6, j] - Kx[6, j + 1])
+            for j in range(hw - 1 if n_candidates > 0 else 0):
+                w0 = Kx[0, j] - Kx[0, j + 1]
+                w1 = Kx[6, j] - Kx[6, j + 1]
+                if falls(w0, w1):
+                    # Screen: the cubic Hermite estimate of the compression maximum from the step ends
+                    # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
+                    d0 = X[j] - X[j + 1]
+                    d1 = XS[j] - XS[j + 1]
+                    if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
+                        continue
+                    theta = first_root(method, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
+                    weights(method, theta, Q, QV)
+                    dp = dense_compression(j, X, Kx, h, Q)
+                    fp = contact_force(dp, C[j], n, pw)  # Eq. (motion_rescaled): c_j delta^(n-1)
+                    if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
+                        peak_f[lo + j] = fp
+                        peak_ft[lo + j] = t + theta * h
+                        peak_d[lo + j] = dp
+            while g < n_grid and t_grid[g] <= t + h:
+                theta = (t_grid[g] - t) / h
+                weights(method, theta, Q, QV)
+                for q in range(n_obs):
+                    k = obs[q] - lo
+                    if k < 0:  # behind the window: the velocity it left with
+                        grid_v[g, q] = v[obs[q]]
+                    else:
+                        grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
+                if wall:
+                    grid_f[g] = contact_force(dense_compression(M - 2 - lo, X, Kx, h, Q), C[M - 2 - lo], n, pw) if M - 2 < hi else 0.0
+                g += 1
+
+            for i in range(hp):
+                X[i] = XS[i]
+                V[i] = VS[i]
+                Kx[0, i] = Kx[6, i]
+                Kv[0, i] = Kv[6, i]
+            t = t + h if not last else t_stop
+            n_acc += 1
+            if h_fixed > 0.0 and not is_finite_window(X, V, hw):  # adaptive: checked in the error norm
+                status = NONFINITE
+                break
+            if hi < M:
+                new_hi = lo + advance_window(XM, VM, hw)
+                if new_hi > hi:
+                    hi = new_hi
+                    accelerations(X, FM, hi - lo, F, Kv[0])
+                    for i in range(hi - lo):
+                        Kx[0, i] = V[i]
+                    n_eval += 1
+            cut = False
+            if goal and front >= 0:
+                if window_lag > 0 and front >= window_lag:
+                    new_lo = open_contact_behind(X, lo, obs[front - window_lag])
+                    if new_lo > lo:
+                        # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
+                        # contacts among them (the contact at the new edge is open), their exit time.
+                        d = new_lo - lo
+                        frozen_potential = add_potential(frozen_potential, X, C, n, 0, d - 1)
+                        for i in range(d):
+                            t_frozen[lo + i] = t
+                        for s in range(7):  # the whole padded width: zeros follow the window
+                            for i in range(Mp - new_lo):
+                                Kx[s, i] = Kx[s, i + d]
+                                Kv[s, i] = Kv[s, i + d]
+                        lo = new_lo
+                        cut = True
+                if relax_lag > 0 and front >= relax_lag:
+                    relaxed = max(0, obs[front - relax_lag] - lo)
+
+            if cut:  # XM, VM, MM still start at the old window start
+                status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], wall, hi - lo, t, run, exit_since, t_needed)
+            else:
+                status, exit_since = end_of_step(XM, VM, MM, wall, hi - lo, t, run, exit_since, t_needed)
+            if status >= 0:
+                break
+
+            if h_fixed <= 0.0:
+                fac = SAFETY * max(err, 1e-10) ** -alpha * err_old**BETA
+                fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+                h *= fac
+                err_old = max(err, 1e-4)
+            if cut:  # new views from the new window start
+                break
+    X, V, C = x[lo:M], v[lo:M], c[lo:M - 1]  # the chain without padding (a cut in the last step left the views behind)
+    final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
+    final_force_peaks(X, V, C, n, pw, lo, t, peak_rtol, peak_f, peak_ft)
+    for k in range(lo):  # the granules behind the window continued ballistically
+        x[k] += v[k] * (t - t_frozen[k])
+    write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential)
+    return status

@@ -1,0 +1,61 @@
+"""The active window: which granules are integrated.
+
+``hi``: granules hi..M-1 are exactly at rest and uncompressed (the initial state's promise,
+``granchain.model.Impulse.rest_ahead``), so only granules 0..hi-1 are integrated. A Runge-Kutta
+step spreads motion by at most a few granules per step (one per two stages), so the window is kept
+``WINDOW_MARGIN`` granules ahead of the last moving one; with that margin the windowed integration
+is identical, bit for bit, to integrating all granules.
+
+``lo``: the trailing window (``granchain.DP5(window_lag=...)``) drops granules behind the pulse
+across a contact that is open at that moment (:func:`open_contact_behind`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .jit import JIT, JIT_INLINE
+
+WINDOW_MARGIN = 5
+
+
+@njit(**JIT)
+def initial_window(x, v):
+    """Window end for a state given at t = 0: WINDOW_MARGIN past the last granule that moves."""
+    M = x.shape[0]
+    last = M - 1
+    while last > 0 and x[last] == 0.0 and v[last] == 0.0:
+        last -= 1
+    return min(M, last + 1 + WINDOW_MARGIN)
+
+
+@njit(**JIT_INLINE)
+def advance_window(x, v, hi):
+    """New window end: WINDOW_MARGIN past the last granule that moved (never shrinks)."""
+    M = x.shape[0]
+    last = hi - 1
+    while last > 0 and x[last] == 0.0 and v[last] == 0.0:
+        last -= 1
+    return max(hi, min(M, last + 1 + WINDOW_MARGIN))
+
+
+@njit(**JIT)
+def open_contact_behind(x, lo, target):
+    """The window start for a cut just behind granule ``target`` (0-based, in the chain): j + 1 for
+    the last contact j < target that is open now (x_j <= x_{j+1}; ``x`` holds the granules lo..),
+    or ``lo`` (no cut) if every contact between lo and target is closed."""
+    for j in range(target - 1, lo - 1, -1):
+        if x[j - lo] - x[j + 1 - lo] <= 0.0:
+            return j + 1
+    return lo
+
+
+@njit(**JIT_INLINE)
+def is_finite_window(x, v, hi):
+    """Every integrated position and velocity (granules 0..hi-1 of the views) is finite."""
+    for k in range(hi):
+        if not (math.isfinite(x[k]) and math.isfinite(v[k])):
+            return False
+    return True
