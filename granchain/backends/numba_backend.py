@@ -14,8 +14,8 @@ from . import Backend, aligned_outputs, effective_integrator
 from .kernels.batch import integrate_batch, thread_sums
 from .kernels.dispatch import integrate_chain
 from .kernels.forces import power_code
-from .kernels.records import (INFO_SIZE, KIND_DP5, KIND_RKN4, KIND_VERLET, Batch, Method, Model, Outputs, Run, Rows,
-                              State, Sums, Tally)
+from .kernels.records import (INFO_SIZE, KIND_DP5, KIND_RKN4, KIND_VERLET, Batch, Method, Model, Outputs, Params, Run,
+                              Rows, State, Sums, Tally)
 
 
 def _rk_params(integ) -> np.ndarray:
@@ -42,9 +42,15 @@ def method_record(integrator) -> Method:
     return Method(kind, pack(integrator))
 
 
+def model_params(chain) -> Params:
+    """The kernels' ``Params`` of ``chain``: the scalars its model declares (contact law, boundary).
+    The one place a new physics parameter is filled in."""
+    return Params(float(chain.n), power_code(chain.n), chain.boundary.wall)
+
+
 def model_record(chain) -> Model:
-    """The kernel's ``Model`` for ``chain``: its arrays and the values its model declares."""
-    return Model(chain.masses, chain.stiffness, chain.n, power_code(chain.n), chain.wall)
+    """The kernel's ``Model`` for ``chain``: its arrays and :func:`model_params`."""
+    return Model(chain.masses, chain.stiffness, model_params(chain))
 
 
 def run_record(chain, t_grid, t_max, stop_at_exit, controls) -> Run:
@@ -92,7 +98,7 @@ class NumbaBackend(Backend):
         # per-thread sums are allocated here, not in the kernel (see thread_sums).
         with numba.parallel_chunksize(1):
             integrate_batch(
-                Batch(masses, stiffness, initial_velocity, float(n), power_code(n), first.wall), method, run,
+                Batch(masses, stiffness, initial_velocity, model_params(first)), method, run,
                 Tally(contacts, float(scale), lags),
                 Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
                      out["status"], out["energy_error"], out["n_steps"], out["t_end"]),

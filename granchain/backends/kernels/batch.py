@@ -22,7 +22,7 @@ from .aligned import accumulate_aligned
 from .dispatch import integrate_chain
 from .forces import final_energy, impulse_energy
 from .jit import JIT, JIT_PARALLEL
-from .records import INFO_SIZE, INFO_STEPS, INFO_T_END, Model, Outputs, Partials, Run, State
+from .records import INFO_SIZE, INFO_STEPS, INFO_T_END, Model, Outputs, Params, Partials, Run, State
 
 
 @njit(**JIT)
@@ -93,7 +93,11 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
     :func:`thread_sums` for numba.get_num_threads() threads (their first axis), added into ``sums``
     at the end.
     """
-    masses, stiffness, v_init, n, pw, wall = batch
+    masses, stiffness, v_init = batch.masses, batch.stiffness, batch.initial_velocity
+    # Rebuilt by a call: Numba's parallel lowering passes a named tuple into the loop body only when
+    # it finds the call (or argument) that made it, not a field read (batch.params).
+    params = Params(*batch.params)
+    wall, n = params.wall, params.n
     obs, t_grid = run.observed, run.t_grid
     contacts, scale, lags = tally
     peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end = rows
@@ -117,7 +121,7 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
         pft = np.zeros(M - 1)
         grid_f = np.zeros(T)
         info = np.zeros(INFO_SIZE)
-        st = integrate_chain(method, Model(m, c, n, pw, wall), exit_run, State(x, v),
+        st = integrate_chain(method, Model(m, c, params), exit_run, State(x, v),
                              Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info))
         gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
         status[r] = st

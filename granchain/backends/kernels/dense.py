@@ -59,16 +59,16 @@ def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     """Acceleration of granule k at t + theta h from the dense-output positions of ``step``
     (``records.Dense``), forces from ``fm`` (``records.Forces``)."""
     x, _, Kx, _, h = step
-    c, inv_m, n, pw = fm
+    c, inv_m, p = fm
     M = x.shape[0]
     weights(method, theta, Q, Qv)
     xk = dense_value(x[k], Kx, k, h, Q)
     left = 0.0
     right = 0.0
     if k > 0:
-        left = contact_force(dense_value(x[k - 1], Kx, k - 1, h, Q) - xk, c[k - 1], n, pw)
+        left = contact_force(dense_value(x[k - 1], Kx, k - 1, h, Q) - xk, c[k - 1], p)
     if k < M - 1:
-        right = contact_force(xk - dense_value(x[k + 1], Kx, k + 1, h, Q), c[k], n, pw)
+        right = contact_force(xk - dense_value(x[k + 1], Kx, k + 1, h, Q), c[k], p)
     return (left - right) * inv_m[k]
 
 

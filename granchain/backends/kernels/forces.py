@@ -37,15 +37,17 @@ def power_code(n: float) -> int:
 
 
 @njit(**JIT)
-def contact_force(d, c, n, pw):
-    """c * d^(n-1) for d > 0, else 0 (Eq. motion_rescaled)."""
+def contact_force(d, c, p):
+    """c * d^(n-1) for d > 0, else 0 (Eq. motion_rescaled); n and its fast path from ``p``
+    (``records.Params``)."""
     if d <= 0.0:
         return 0.0
+    pw = p.power
     if pw == POW_HERTZ:
         return c * d * math.sqrt(d)
     if pw == POW_LINEAR:
         return c * d
-    return c * d ** (n - 1.0)
+    return c * d ** (p.n - 1.0)
 
 
 @njit(**JIT_INLINE)
@@ -55,18 +57,18 @@ def accelerations(x, fm, hi, F, a):
     ``F`` is scratch of length >= hi + 1: F[j + 1] receives the force of contact j, and F[0] (the free
     end) and F[hi] past the last granule (when hi = M) are set to 0, so that a_k = (F[k] - F[k + 1]) / m_k
     for every k, the chain's ends included, in one loop that vectorises."""
-    c, inv_m, n, pw = fm
+    c, inv_m, p = fm
     M = x.shape[0]
     nc = min(hi, M - 1)  # contacts 0..nc-1; contact hi-1 touches the resting granule hi
     F[0] = 0.0
     F[hi] = 0.0  # overwritten below by contact hi - 1 unless hi = M
-    if pw == POW_HERTZ:  # branch-free so that the loop vectorises (SIMD sqrt)
+    if p.power == POW_HERTZ:  # branch-free so that the loop vectorises (SIMD sqrt)
         for j in range(nc):
             d = max(x[j] - x[j + 1], 0.0)
             F[j + 1] = c[j] * d * math.sqrt(d)
     else:
         for j in range(nc):
-            F[j + 1] = contact_force(x[j] - x[j + 1], c[j], n, pw)
+            F[j + 1] = contact_force(x[j] - x[j + 1], c[j], p)
     for k in range(hi):
         a[k] = (F[k] - F[k + 1]) * inv_m[k]
 
@@ -74,10 +76,10 @@ def accelerations(x, fm, hi, F, a):
 @njit(**JIT)
 def acceleration_of(x, k, fm):
     """The acceleration of granule k alone (``fm``: ``records.Forces``)."""
-    c, inv_m, n, pw = fm
+    c, inv_m, p = fm
     M = x.shape[0]
-    left = contact_force(x[k - 1] - x[k], c[k - 1], n, pw) if k > 0 else 0.0
-    right = contact_force(x[k] - x[k + 1], c[k], n, pw) if k < M - 1 else 0.0
+    left = contact_force(x[k - 1] - x[k], c[k - 1], p) if k > 0 else 0.0
+    right = contact_force(x[k] - x[k + 1], c[k], p) if k < M - 1 else 0.0
     return (left - right) * inv_m[k]
 
 

@@ -38,9 +38,9 @@ def initial_force_records(x, model, g, out):
     for j in range(M - 1):
         out.peak_f[j] = 0.0
         out.peak_ft[j] = 0.0
-    if model.wall:
+    if model.params.wall:
         for gg in range(g):
-            out.grid_f[gg] = contact_force(x[M - 2] - x[M - 1], model.stiffness[M - 2], model.n, model.power)
+            out.grid_f[gg] = contact_force(x[M - 2] - x[M - 1], model.stiffness[M - 2], model.params)
 
 
 @njit(**JIT)
@@ -73,7 +73,7 @@ def final_peaks(obs, lo, v, a, t, peak_rtol, peak_v, peak_t):
 
 
 @njit(**JIT)
-def final_force_peaks(x, v, c, n, pw, lo, t, peak_rtol, peak_f, peak_ft):
+def final_force_peaks(x, v, c, p, lo, t, peak_rtol, peak_f, peak_ft):
     """The force at the end of the run is a candidate for contacts still compressing
     (delta > 0 and v_k - v_{k+1} > 0): their maximum lies beyond the run.
 
@@ -81,7 +81,7 @@ def final_force_peaks(x, v, c, n, pw, lo, t, peak_rtol, peak_f, peak_ft):
     chain is entry j - lo); the contacts behind a trailing window have final peaks."""
     for j in range(x.shape[0] - 1):
         if v[j] - v[j + 1] > 0.0:
-            f = contact_force(x[j] - x[j + 1], c[j], n, pw)
+            f = contact_force(x[j] - x[j + 1], c[j], p)
             if f > 0.0 and is_new_peak(f, peak_f[lo + j], peak_rtol):
                 peak_f[lo + j] = f
                 peak_ft[lo + j] = t

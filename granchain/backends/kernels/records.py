@@ -14,17 +14,22 @@ from __future__ import annotations
 
 from collections import namedtuple
 
+#: The model's scalar parameters, passed whole through every kernel that reads any of them: ``n`` the
+#: exponent of the power-law contact (granchain.model.PowerLaw); ``power`` its fast-path code
+#: (``forces.power_code``); ``wall`` whether the far end is a rigid wall (the boundary value of the
+#: chain, ``granchain.model.RigidWall``: asked here once, not re-derived from the infinite mass).
+#: A new physics parameter is one more field here, filled in one place
+#: (``granchain.backends.numba_backend.model_params``), and the kernels that need it read it by name:
+#: no signature between them changes (``tests/test_backends.py`` checks this).
+Params = namedtuple("Params", ["n", "power", "wall"])
+
 #: One chain as the kernels see it (Eq. motion_rescaled). ``masses`` (M,), the last ``inf`` for a
-#: rigid wall; ``stiffness`` (M-1,), the prefactors c_k; ``n`` the exponent of the power-law contact;
-#: ``power`` its fast-path code (``forces.power_code``); ``wall`` whether the far end is a rigid wall
-#: (the boundary value of the chain, ``granchain.model.RigidWall``: asked here once, not re-derived
-#: from the infinite mass).
-Model = namedtuple("Model", ["masses", "stiffness", "n", "power", "wall"])
+#: rigid wall; ``stiffness`` (M-1,), the prefactors c_k; ``params`` its :data:`Params`.
+Model = namedtuple("Model", ["masses", "stiffness", "params"])
 
 #: A batch of chains of one size for the ensemble kernel: ``masses`` (R, M), ``stiffness`` (R, M-1),
-#: ``initial_velocity`` (R,) (the impulse on granule 1 of each row), the shared ``n``, ``power``,
-#: ``wall``.
-Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "n", "power", "wall"])
+#: ``initial_velocity`` (R,) (the impulse on granule 1 of each row), and the :data:`Params` the rows share.
+Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "params"])
 
 #: The integration method: ``kind`` (``dispatch.KIND_*``) and its settings ``params`` (float64,
 #: laid out by the kind: see ``dispatch.integrate_chain``).
@@ -67,8 +72,8 @@ Tally = namedtuple("Tally", ["contacts", "scale", "lags"])
 Partials = namedtuple("Partials", ["sum_v", "sum_v2", "sum_wall", "n_valid", "sum_a", "sum_a2"])
 
 #: What a force evaluation reads, as views from the window's first granule on: the contact
-#: prefactors, the inverse masses (0 for a wall and for padding), the exponent and its fast-path code.
-Forces = namedtuple("Forces", ["stiffness", "inv_mass", "n", "power"])
+#: prefactors, the inverse masses (0 for a wall and for padding) and the model's :data:`Params`.
+Forces = namedtuple("Forces", ["stiffness", "inv_mass", "params"])
 
 # Slots of the ``info`` array every single-chain kernel fills.
 INFO_T_END = 0  # time the run stopped

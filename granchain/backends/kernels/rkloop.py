@@ -98,7 +98,7 @@ def rk_integrate(method, steps, model, run, state, out):
     velocity at each time t_grid[g] into ``grid_v[g, q]`` (time-major: one contiguous row per grid
     time). For each contact j (0-based, M-1 of them) it writes the maximum contact force
     ``peak_f[j]`` and its time ``peak_ft[j]`` (0 at t = 0 for a contact that never closed; same tie
-    rule as the velocities); with a wall (``model.wall``) ``grid_f[g]`` receives the wall force at
+    rule as the velocities); with a wall (``model.params.wall``) ``grid_f[g]`` receives the wall force at
     t_grid[g] (untouched otherwise). ``steps.fixed_step > 0`` turns step control off. With
     ``run.stop_at_exit`` the run ends ``exit_margin`` after the pulse has left the last granule (and
     not before t_grid[-1]); otherwise at ``t_max``.
@@ -119,7 +119,7 @@ def rk_integrate(method, steps, model, run, state, out):
     evaluations, window start, potential energy of the frozen contacts). Returns the status code
     (``granchain._status``).
     """
-    m, c, n, pw, wall = model
+    m, c = model.masses, model.stiffness
     x, v = state
     M = m.shape[0]
     # The padded layout (see LANES): state, stiffness and inverse masses of the M granules followed
@@ -145,7 +145,7 @@ def rk_integrate(method, steps, model, run, state, out):
     t_frozen = np.zeros(M)  # time each granule left the trailing window
     # The step loop works on borrowed views (see memory.borrowed): the arguments are held by
     # our caller, the scratch arrays above by the keep_alive call after the loop.
-    bmodel = Model(borrowed(m), borrowed(cp), n, pw, wall)
+    bmodel = Model(borrowed(m), borrowed(cp), model.params)
     brun = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin,
                run.max_steps, run.peak_rtol)
     bstate = State(borrowed(xp), borrowed(vp))
@@ -187,7 +187,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); error
     ratios ``ratio`` (2 Mp)) in the tuple ``scratch``."""
     inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen = scratch
-    m, c, n, pw, wall = model
+    m, c, p = model.masses, model.stiffness, model.params
     x, v = state
     obs, t_grid = run.observed, run.t_grid
     peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
@@ -206,7 +206,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     goal = relax_lag > 0 or window_lag > 0
     lo = 0
     hi = initial_window(x[:M], v[:M])
-    accelerations(x, Forces(c, inv_m, n, pw), hi, F, Kv[0])
+    accelerations(x, Forces(c, inv_m, p), hi, F, Kv[0])
     for i in range(hi):
         Kx[0, i] = v[i]
     n_eval = 1
@@ -237,7 +237,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
         X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
         XS, VS = xs[lo:], vs[lo:]
         XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
-        FM = Forces(C, IM, n, pw)
+        FM = Forces(C, IM, p)
         while status < 0:
             if n_acc + n_rej >= run.max_steps:
                 status = MAX_STEPS
@@ -319,7 +319,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                     theta = first_root(method, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
                     weights(method, theta, Q, QV)
                     dp = dense_compression(j, X, Kx, h, Q)
-                    fp = contact_force(dp, C[j], n, pw)  # Eq. (motion_rescaled): c_j delta^(n-1)
+                    fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
                     if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
                         peak_f[lo + j] = fp
                         peak_ft[lo + j] = t + theta * h
@@ -333,8 +333,8 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                         grid_v[g, q] = v[obs[q]]
                     else:
                         grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
-                if wall:
-                    grid_f[g] = contact_force(dense_compression(M - 2 - lo, X, Kx, h, Q), C[M - 2 - lo], n, pw) if M - 2 < hi else 0.0
+                if p.wall:
+                    grid_f[g] = contact_force(dense_compression(M - 2 - lo, X, Kx, h, Q), C[M - 2 - lo], p) if M - 2 < hi else 0.0
                 g += 1
 
             for i in range(hp):
@@ -363,7 +363,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                         # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
                         # contacts among them (the contact at the new edge is open), their exit time.
                         d = new_lo - lo
-                        frozen_potential = add_potential(frozen_potential, X, C, n, 0, d - 1)
+                        frozen_potential = add_potential(frozen_potential, X, C, p.n, 0, d - 1)
                         for i in range(d):
                             t_frozen[lo + i] = t
                         for s in range(7):  # the whole padded width: zeros follow the window
@@ -376,9 +376,9 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                     relaxed = max(0, obs[front - relax_lag] - lo)
 
             if cut:  # XM, VM, MM still start at the old window start
-                status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], wall, hi - lo, t, run, exit_since, t_needed)
+                status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], p.wall, hi - lo, t, run, exit_since, t_needed)
             else:
-                status, exit_since = end_of_step(XM, VM, MM, wall, hi - lo, t, run, exit_since, t_needed)
+                status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed)
             if status >= 0:
                 break
 
@@ -391,7 +391,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                 break
     X, V, C = x[lo:M], v[lo:M], c[lo:M - 1]  # the chain without padding (a cut in the last step left the views behind)
     final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
-    final_force_peaks(X, V, C, n, pw, lo, t, peak_rtol, peak_f, peak_ft)
+    final_force_peaks(X, V, C, p, lo, t, peak_rtol, peak_f, peak_ft)
     for k in range(lo):  # the granules behind the window continued ballistically
         x[k] += v[k] * (t - t_frozen[k])
     write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential)

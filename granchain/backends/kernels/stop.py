@@ -1,7 +1,7 @@
 """When a run ends: the pulse has left the chain through its free end, or come back from a wall.
 
 The boundary (``granchain.model.FreeEnd`` or ``RigidWall``) decides which rule applies; the
-kernels get it as ``Model.wall``, asked once.
+kernels get it as ``Params.wall``, asked once.
 """
 
 from __future__ import annotations

@@ -38,17 +38,17 @@ def hermite(y0, dy0, y1, dy1, h, theta):
 
 
 @njit(**JIT)
-def _hermite_force(j, x_old, v_old, x, v, h, theta, c, n, pw):
+def _hermite_force(j, x_old, v_old, x, v, h, theta, c, p):
     """Contact force of contact j at t + theta h from the Hermite positions (Eq. motion_rescaled)."""
     d = hermite(x_old[j], v_old[j], x[j], v[j], h, theta) - hermite(x_old[j + 1], v_old[j + 1], x[j + 1], v[j + 1], h, theta)
-    return contact_force(d, c[j], n, pw)
+    return contact_force(d, c[j], p)
 
 
 @njit(**JIT)
 def verlet_integrate(h, model, run, state, out):
     """Fixed-step velocity Verlet with step ``h``; the contract of ``rkloop.rk_integrate`` (``model``,
     ``run``, ``state``, ``out``: the records of ``records``)."""
-    m, c, n, pw, wall = model
+    m, c, p = model.masses, model.stiffness, model.params
     x, v = state
     obs, t_grid, peak_rtol = run.observed, run.t_grid, run.peak_rtol
     peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
@@ -56,7 +56,7 @@ def verlet_integrate(h, model, run, state, out):
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
     inv_m = 1.0 / m
-    fm = Forces(c, inv_m, n, pw)
+    fm = Forces(c, inv_m, p)
     a = np.zeros(M)
     a_new = np.zeros(M)
     v_old = np.zeros(M)
@@ -105,7 +105,7 @@ def verlet_integrate(h, model, run, state, out):
             w1 = v[j] - v[j + 1]
             if (w0 > 0.0) & (w1 <= 0.0):
                 theta = w0 / (w0 - w1)
-                fp = _hermite_force(j, x_old, v_old, x, v, dt, theta, c, n, pw)
+                fp = _hermite_force(j, x_old, v_old, x, v, dt, theta, c, p)
                 if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
                     peak_f[j] = fp
                     peak_ft[j] = t + theta * dt
@@ -114,8 +114,8 @@ def verlet_integrate(h, model, run, state, out):
             for q in range(n_obs):
                 k = obs[q]
                 grid_v[g, q] = hermite(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
-            if wall:
-                grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, n, pw) if M - 2 < hi else 0.0
+            if p.wall:
+                grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, p) if M - 2 < hi else 0.0
             g += 1
         for i in range(hi):
             a[i] = a_new[i]
@@ -129,10 +129,10 @@ def verlet_integrate(h, model, run, state, out):
             hi = new_hi
             accelerations(x, fm, hi, F, a)
             n_eval += 1
-        status, exit_since = end_of_step(x, v, m, wall, hi, t, run, exit_since, t_needed)
+        status, exit_since = end_of_step(x, v, m, p.wall, hi, t, run, exit_since, t_needed)
         if status >= 0:
             break
     final_peaks(obs, 0, v, a, t, peak_rtol, peak_v, peak_t)
-    final_force_peaks(x, v, c, n, pw, 0, t, peak_rtol, peak_f, peak_ft)
+    final_force_peaks(x, v, c, p, 0, t, peak_rtol, peak_f, peak_ft)
     write_info(out.info, t, n_acc, 0, exit_since, n_eval, 0, 0.0)
     return status
