@@ -11,12 +11,12 @@ two promises of the grouped kernel records.
    backend's ``check`` refuses a method for x'' = f(x) on a contact law that is not conservative,
    and ``effective_integrator`` switches the goal-oriented zones off for a chain ending in a wall
    (bitwise the exact method there) and leaves them on otherwise.
-2. Grouped records. No compiled function of ``granchain.backends.kernels`` takes more than 8
+2. Grouped records. No compiled entry point of ``granchain.backends.kernels`` takes more than 8
    positional parameters (a long positional call is where a swapped argument hides), with a
    negative control showing that the counter flags one that does.
-3. One seam for the model. A field added to ``records.Model`` and filled in
-   ``numba_backend.model_record`` reaches the kernels' step loops with no other change, and changes
-   nothing else in the results.
+3. One seam for the model. A field added to ``records.Params`` (the model's scalars) and filled in
+   ``numba_backend.model_params`` reaches the kernels' step loops, for one chain and through the
+   batch kernel, with no other change, and changes nothing else in the results.
 
 Why: the renovation moved every kernel behind ``granchain.backends``; these tests pin what that
 layer promises, so that the next method, backend or model parameter cannot quietly break it.
