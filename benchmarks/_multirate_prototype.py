@@ -26,10 +26,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from granchain._kernels import _rkn
-from granchain._kernels._common import POW_HERTZ, acceleration_of, accelerations, contact_force
-from granchain._kernels._dp5 import ALPHA_RKN4 as ALPHA
-from granchain._kernels._dp5 import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY
+from granchain.backends.kernels import rkn4 as _rkn
+from granchain.backends.kernels.forces import POW_HERTZ, acceleration_of, accelerations, contact_force
+from granchain.backends.kernels.records import Forces, Params
+from granchain.backends.kernels.rkloop import ALPHA_RKN4 as ALPHA
+from granchain.backends.kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY
 
 N = 2.5  # Hertz contacts, Eq. (motion_rescaled)
 
@@ -49,7 +50,7 @@ def _rejected_factor(err):
 def _local_accelerations(x, c, inv_m, a, lo, hi):
     """a[lo..hi-1] (their contacts only)."""
     for k in range(max(lo, 0), min(hi, x.shape[0])):
-        a[k] = acceleration_of(x, k, c, inv_m, N, POW_HERTZ)
+        a[k] = acceleration_of(x, k, Forces(c, inv_m, Params(N, POW_HERTZ, False)))
 
 
 @njit(cache=True)
@@ -73,7 +74,7 @@ def _poly(q, th):
 @njit(cache=True)
 def _fast_forces(y, th, ql, qr, cl, cr):
     """(force of the left contact on the fast granule, force of the right contact on the right neighbour)."""
-    return contact_force(_poly(ql, th) - y, cl, N, POW_HERTZ), contact_force(y - _poly(qr, th), cr, N, POW_HERTZ)
+    return contact_force(_poly(ql, th) - y, cl, Params(N, POW_HERTZ, False)), contact_force(y - _poly(qr, th), cr, Params(N, POW_HERTZ, False))
 
 
 @njit(cache=True)
@@ -159,7 +160,7 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
     push_v = np.zeros(M)
     vprev = np.zeros(n_obs)
     peaked = np.zeros(n_obs, np.bool_)
-    accelerations(x, cm, im, N, POW_HERTZ, M, F, a)
+    accelerations(x, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, a)
     front = -1
     relaxed = 0
     for q in range(n_obs):
@@ -179,13 +180,13 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
         h2 = h * h
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C1 * v[i]) + h2 * (_rkn.A10 * a[i])
-        accelerations(xs, cm, im, N, POW_HERTZ, M, F, f1)
+        accelerations(xs, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, f1)
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C2 * v[i]) + h2 * (_rkn.A20 * a[i] + _rkn.A21 * f1[i])
-        accelerations(xs, cm, im, N, POW_HERTZ, M, F, f2)
+        accelerations(xs, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, f2)
         for i in range(M):
             xs[i] = x[i] + h * v[i] + h2 * (_rkn.B0 * a[i] + _rkn.B1 * f1[i] + _rkn.B2 * f2[i])
-        accelerations(xs, cm, im, N, POW_HERTZ, M, F, f3)
+        accelerations(xs, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, f3)
         err = 0.0
         for i in range(M):
             vs[i] = v[i] + h * (_rkn.P0 * a[i] + _rkn.P1 * f1[i] + _rkn.P2 * f2[i] + _rkn.P3 * f3[i])

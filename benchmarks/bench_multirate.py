@@ -36,7 +36,7 @@ import time
 import numpy as np
 
 import granchain as gc
-from granchain._integrators import RELAXED_FACTOR, RELAXED_LAG
+from granchain.solve.integrators import RELAXED_FACTOR, RELAXED_LAG
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _multirate_prototype  # noqa: E402

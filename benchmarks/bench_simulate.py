@@ -1,7 +1,7 @@
 """One decorated random chain (N = 26) with granchain vs SciPy ``solve_ivp`` at matched accuracy.
 
 Baseline: ``scipy.integrate.solve_ivp(method="RK45")`` on the same right-hand side
-(``granchain._reference.chain_rhs``, vectorised NumPy), peaks located on its dense output
+(``granchain.backends.scipy_backend.chain_rhs``, vectorised NumPy), peaks located on its dense output
 (root of the acceleration, the same tie rule as granchain), over the same time span.
 Its tolerance is the loosest of a scan whose peak-velocity error (vs SciPy DOP853 at
 rtol 1e-10 / atol 1e-12, the package's accuracy reference) is no larger than granchain's.
@@ -26,7 +26,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import granchain as gc
-from granchain._reference import chain_rhs
+from granchain.backends.scipy_backend import chain_rhs
 
 # Drawn once from numpy.random.default_rng(20240601).uniform(0.01, 0.4, 25), rounded to 6 digits,
 # and frozen here so that every run integrates the same chain.

@@ -8,7 +8,7 @@ Baselines, both measured in the same run:
 - ``0.2 DP5``: the same integrator in granchain as it was in 0.2 ("the 0.2 DP5":
   commit ``BASELINE_COMMIT``, taken from this repository's history with ``git archive`` and timed in
   a subprocess on the same realisations). The ratio to it adds what the step-loop kernel work
-  bought (borrowed arrays in the step loop: no reference counting; see ``_kernels/_common.borrowed``).
+  bought (borrowed arrays in the step loop: no reference counting; see ``granchain.backends.kernels.memory.borrowed``).
   Skipped, with a note, where there is no git history.
 
 Compared:

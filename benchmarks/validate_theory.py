@@ -1,7 +1,7 @@
 """Validate ``granchain.theory.predict`` against decorated-chain ensembles.
 
 For each small-radius law (U[0.01, 0.4] the paper's, U[0.1, 0.4], U[0.01, 0.6], and the truncated
-normal and bimodal mixture of ``granchain.validity.default_distributions`` on [0.01, 0.4]) and
+normal and bimodal mixture of ``granchain.paper.validity.default_distributions`` on [0.01, 0.4]) and
 N = 26, 51: a 3000-realisation decorated ensemble (resumable Zarr store under --work, seed 11,
 chunks of 250 for the jackknife) and the theory's prediction (which never sees the ensemble). Per
 observable the max and rms relative error over k = 4..N-1 (arrival times: absolute error of the
@@ -25,7 +25,7 @@ import numpy as np
 
 def laws():
     import granchain as gc
-    from granchain.validity import default_distributions
+    from granchain.paper.validity import default_distributions
 
     d = default_distributions(0.01, 0.4)
     return {"U[0.01, 0.4]": gc.Uniform(0.01, 0.4), "U[0.1, 0.4]": gc.Uniform(0.1, 0.4), "U[0.01, 0.6]": gc.Uniform(0.01, 0.6),

@@ -94,10 +94,10 @@ _write_top_level_api()
 nitpick_ignore = [
     ("py:class", "enum.IntEnum"),                     # Status's base: no intersphinx (the build runs offline)
     ("py:class", "granchain.analysis._Fit"),          # private base class of the fit results (analysis.py)
-    ("py:class", "granchain._distributions._Base"),   # private base class of Uniform/Truncated (_distributions.py)
+    ("py:class", "granchain.model.distributions._Base"),   # private base class of Uniform/Truncated (_distributions.py)
     ("py:class", "granchain.families._Decorated"),    # private base of RandomDecorated/TaperedDecorated (families.py)
     ("py:class", "granchain.families._RadiiFamily"),  # private base of RandomRadii/BinaryRandom (families.py)
-    ("py:class", "granchain._integrators._Compiled"), # private base of the compiled integrators DP5/Verlet
+    ("py:class", "granchain.solve.integrators._Compiled"), # private base of the compiled integrators DP5/Verlet
     ("py:class", "Chain"),                            # bca.time_to_max_compression says `Chain`, not granchain.Chain
     ("py:attr", "correlation"),                       # analysis.StretchedExpFit: backquoted attribute names
     ("py:meth", "stderr"),                            # analysis.StretchedExpFit / compare_curves: idem

@@ -5,14 +5,14 @@ The founding reference is U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg,
 """
 
 from ._version import __version__
-from ._chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered, wall_stiffness
-from ._distributions import Mixture, Truncated, Uniform, as_distribution, small_radius_distribution
-from ._effective import effective, effective_parameters
-from ._random import draw_small_radii, random_decorated, realization_rng
+from .model.chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered, wall_stiffness
+from .model.distributions import Mixture, Truncated, Uniform, as_distribution, small_radius_distribution
+from .model.effective import effective, effective_parameters
+from .model.random import draw_small_radii, random_decorated, realization_rng
 from ._status import Status
 from ._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
-from ._integrators import DOP853, DP5, INTEGRATORS, RKN4, Integrator, RunControls, Verlet, VerletStabilityWarning, get_integrator
-from ._simulate import PulseResult, default_t_max, simulate
+from .solve.integrators import DOP853, DP5, INTEGRATORS, RKN4, Integrator, RunControls, Verlet, VerletStabilityWarning, get_integrator
+from .solve.simulate import PulseResult, default_t_max, simulate
 from .families import (
     FAMILIES,
     BinaryRandom,
@@ -24,7 +24,7 @@ from .families import (
     family_from_dataset,
     family_from_record,
 )
-from ._ensemble import ENSEMBLE_ATOL, ENSEMBLE_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, EnsembleSpec, default_time_grid, ensemble_integrator, run_ensemble
+from .ensembles.run import ENSEMBLE_ATOL, ENSEMBLE_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, EnsembleSpec, default_time_grid, ensemble_integrator, run_ensemble
 from .units import Material, Scale, scale, to_physical  # physical units; the rest in granchain.units
 
 __all__ = [
@@ -84,17 +84,29 @@ __all__ = [
     "tapered",
     "to_physical",
 ]
-#: The statistics and the paper's research modules load on first use (``granchain.validity``,
-#: ``from granchain import analysis``, ...): a run of the dynamics does not pay for SciPy's fitting
-#: and statistics imports.
-_LAZY_MODULES = ("analysis", "bca", "dephasing", "figures", "theory", "validity")
+#: The statistics, the paper's research and the theories load on first use (``from granchain import
+#: analysis``, ``granchain.paper.validity``, ...): a run of the dynamics does not pay for SciPy's
+#: fitting and statistics imports.
+_LAZY_MODULES = ("analysis", "bca", "paper", "theory")
+#: Moved in 0.5 (granchain.paper): still reachable as attributes, with a DeprecationWarning.
+_MOVED_MODULES = ("dephasing", "figures", "validity")
 
 
 def __getattr__(name):
-    if name in _LAZY_MODULES:
-        import importlib
+    import importlib
 
+    if name in _LAZY_MODULES:
         return importlib.import_module(f"{__name__}.{name}")
+    if name in _MOVED_MODULES:
+        import warnings
+
+        from ._moved import MOVED
+
+        warnings.warn(f"granchain.{name} moved to {MOVED[f'granchain.{name}']} in granchain 0.5; import it from there "
+                      "(the old path will be removed)", DeprecationWarning, stacklevel=2)
+        with warnings.catch_warnings():  # warned here, where the caller is
+            warnings.simplefilter("ignore", DeprecationWarning)
+            return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

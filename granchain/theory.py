@@ -2,7 +2,7 @@
 
 The averaged pulse max_t <v_k(t)> decays mostly by dephasing of realisations, and the mean
 single-realisation peak <max_t v_k> by a solitary wave crossing random contact stiffnesses
-(:mod:`granchain.dephasing`). Both need the joint law of each realisation's peaks P_k and peak
+(:mod:`granchain.paper.dephasing`). Both need the joint law of each realisation's peaks P_k and peak
 times t_k. This module predicts that law without integrating the chain:
 
 1. **Effective chain** (paper Eqs. renorm-mass, effec-int, zetak): small radius R_j gives the
@@ -33,7 +33,7 @@ times t_k. This module predicts that law without integrating the chain:
    — the window of recent contacts is the pulse's "shape" state — whose samples carry the
    correlations of P_k and t_k. No chain is integrated.
 
-5. **Averaged pulse** by the dephasing convolution (:mod:`granchain.dephasing`, Eq. 1):
+5. **Averaged pulse** by the dephasing convolution (:mod:`granchain.paper.dephasing`, Eq. 1):
    <v_k(t)> = <P_k S((t - t_k) / s_k)>, S the monodisperse solitary wave's time profile and s_k
    each sample's local time scale (its steps into and out of k against the monodisperse step).
 
@@ -54,9 +54,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ._chain import HERTZ
-from ._distributions import small_radius_distribution
-from ._effective import effective_parameters
+from .model.chain import HERTZ
+from .model.distributions import small_radius_distribution
+from .model.effective import effective_parameters
 from ._validate import count, exponent
 from ._version import __version__
 from .units import rescaled_attrs
@@ -158,8 +158,8 @@ def _simulate_batch(masses: np.ndarray, stiffness: np.ndarray, n: float, observe
     at granule 1 with v = 1, by the compiled DP5 batch kernel that ensembles use. With ``lags``,
     also the batch's aligned pulse <v(t_peak + tau)> per observed granule (on a grid of step
     ``dt``, cubic interpolation: ``granchain.backends.kernels.aligned``)."""
-    from ._integrators import DP5, RunControls
-    from ._simulate import time_limit
+    from .solve.integrators import DP5, RunControls
+    from .solve.simulate import time_limit
 
     R, M = masses.shape
     obs = np.arange(M, dtype=np.int64) if observed is None else np.asarray(observed, dtype=np.int64)
@@ -319,8 +319,8 @@ def transfer_table(distribution, start: str, end: str, width: int, step: int, se
 
 # --------------------------------------------------------------------------- monodisperse references
 def _monodisperse(size: int, n: float, t_grid=None):
-    from ._chain import monodisperse
-    from ._simulate import simulate
+    from .model.chain import monodisperse
+    from .solve.simulate import simulate
 
     return simulate(monodisperse(size, n=n), t_grid=t_grid)
 
@@ -448,7 +448,7 @@ def _parabola_peak(t, y) -> tuple[float, float]:
 
 def averaged_pulse(peak, times, profiles, n: float = HERTZ, *, points: int = 201) -> tuple[np.ndarray, np.ndarray]:
     """max_t and argmax_t of <P_k S_k((t - t_k) / f_k)> per granule: the dephasing convolution
-    (:mod:`granchain.dephasing`, Eq. 1) of the Monte Carlo's (P_k, t_k) with the window chains'
+    (:mod:`granchain.paper.dephasing`, Eq. 1) of the Monte Carlo's (P_k, t_k) with the window chains'
     aligned pulse S_k, its time axis stretched by f_k = (<P_k> / p_k)^(-(n-2)/n) from the windows'
     amplitude p_k to the chain's (Nesterenko's scaling of the pulse duration)."""
     S_, N = peak.shape

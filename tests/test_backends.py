@@ -3,7 +3,7 @@ two promises of the grouped kernel records.
 
 1. Conformance. A short list of chains (monodisperse, a fixed and a random decorated chain, the
    random one's effective chain, a general exponent n = 3, decorated and monodisperse chains ending
-   in a rigid wall) runs through every integrator in ``granchain._integrators.INTEGRATORS`` (so a
+   in a rigid wall) runs through every integrator in ``granchain.solve.integrators.INTEGRATORS`` (so a
    new one is picked up, and fails until it is given a case with its tolerances) and is compared
    with SciPy's DOP853 at rtol 1e-11: status, peak velocities and times, velocities on a time grid,
    energy, momentum (or, with a wall, the wall's impulse) and the stop event. Tolerances are scaled
@@ -44,9 +44,9 @@ import pytest
 
 import granchain as gc
 from conftest import in_order
-from granchain._integrators import INTEGRATORS
+from granchain.solve.integrators import INTEGRATORS
 from granchain.backends import BACKENDS, effective_integrator, get_backend
-from granchain.model import PowerLaw
+from granchain.model.contacts import PowerLaw
 
 # -- 1. conformance ---------------------------------------------------------------------------------
 #: The chains every integrator runs (built lazily, once).

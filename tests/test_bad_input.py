@@ -56,7 +56,7 @@ def test_simulate_warns_when_it_does_not_succeed():
 
 def test_verlet_warns_beyond_its_stability_limit():
     chain = gc.random_decorated(6, seed=0, realization=0)
-    from granchain._integrators import VerletStabilityWarning
+    from granchain.solve.integrators import VerletStabilityWarning
 
     with pytest.warns(VerletStabilityWarning, match="dt"):
         gc.simulate(chain, gc.Verlet(dt=0.05))
@@ -100,7 +100,7 @@ def test_cli_names_the_option_without_traceback(argv, name, tmp_path, capsys):
 # -- inputs that used to run silently --------------------------------------------------------------
 
 def test_empty_validity_grid_is_refused_before_anything_is_written(tmp_path, capsys):
-    from granchain import validity
+    from granchain.paper import validity
 
     with pytest.raises(ValueError, match=r"no grid point has alpha < beta \(alphas=\[0.5\], betas=\[0.1\]\)"):
         validity.validity_map(tmp_path / "api", alphas=[0.5], betas=[0.1], n_large=4, progress=False)
@@ -115,7 +115,7 @@ def test_empty_validity_grid_is_refused_before_anything_is_written(tmp_path, cap
 def test_validity_report_reads_sensibly_where_a_row_has_no_point(tmp_path):
     """alpha = 0.3 has no beta above it in the grid: the summary says nothing about it, instead of
     splicing "N=6, alpha=0.3: < 0.1" into the sentence."""
-    from granchain import validity
+    from granchain.paper import validity
 
     ds = validity.validity_map(tmp_path / "v", alphas=[0.05, 0.3], betas=[0.1, 0.2], n_large=4, realizations=20, blocks=4,
                                progress=False, netcdf=False)

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from granchain._integrators import INTEGRATORS
+from granchain.solve.integrators import INTEGRATORS
 from granchain.cli import SUBCOMMANDS, main
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import granchain as gc
-from granchain import dephasing
+from granchain.paper import dephasing
 
 LAGS = np.arange(-12.0, 12.001, 0.1)
 

@@ -38,7 +38,7 @@ import pytest
 import xarray as xr
 
 import granchain as gc
-from granchain import _ensemble as ens
+from granchain.ensembles import run as ens
 
 N = 6  # large granules of the small test ensembles
 SEED = 11

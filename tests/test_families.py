@@ -21,8 +21,8 @@ import scipy.stats as st
 import xarray as xr
 
 import granchain as gc
-from granchain import _ensemble as ens
-from granchain._store import StoreRepairWarning
+from granchain.ensembles import run as ens
+from granchain.ensembles.store import StoreRepairWarning
 from granchain.cli import main as cli_main
 
 DATA = Path(__file__).parent / "data"
@@ -438,7 +438,7 @@ def test_fig3_uses_the_slope_of_the_stored_distribution():
     """Fig. 3 of an ensemble with a Truncated distribution: S = bca.slope(that distribution), not the
     paper's uniform S (0.1.0 used U[0.01, 0.4] whatever the ensemble drew)."""
     from granchain import bca
-    from granchain.figures import fig3
+    from granchain.paper.figures import fig3
 
     dist = gc.Truncated(st.beta(2, 8), upper=0.4)
     ds = gc.run_ensemble(gc.RandomDecorated(6, dist), realizations=30, seed=2, chunk_size=10, progress=False)
@@ -472,7 +472,7 @@ def test_aligned_pulse_in_a_store_is_checked_and_repaired(tmp_path):
     per-chunk sums are checksummed, and a deleted sum chunk is recomputed on resume, bitwise."""
     import shutil
 
-    from granchain._store import StoreRepairWarning
+    from granchain.ensembles.store import StoreRepairWarning
 
     family, lags = gc.RandomDecorated(5), np.arange(-2.0, 2.01, 0.5)
     kw = dict(realizations=12, seed=1, chunk_size=5, lags=lags, progress=False)

@@ -13,9 +13,9 @@ import xarray as xr  # noqa: E402
 
 import granchain as gc  # noqa: E402
 from granchain import analysis  # noqa: E402
-from granchain._ensemble import default_time_grid  # noqa: E402
-from granchain.figures import fig1, fig2, fig3, fig4  # noqa: E402
-from granchain.figures._style import text_overlaps  # noqa: E402
+from granchain.ensembles.run import default_time_grid  # noqa: E402
+from granchain.paper.figures import fig1, fig2, fig3, fig4  # noqa: E402
+from granchain.paper.figures._style import text_overlaps  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +110,7 @@ def test_theory_figure_says_what_it_compares():
     paper's fit is drawn for the paper's law only, and no stretched exponential is fitted through
     fewer than six granules (three parameters would fit anything)."""
     from granchain import theory
-    from granchain.figures import theory as figure
+    from granchain.paper.figures import theory as figure
 
     small = dict(memory=2, nodes=3, samples=1000, profile_windows=100)
     law = gc.Uniform(0.05, 0.3)

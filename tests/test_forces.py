@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import granchain as gc
-from granchain import _ensemble as ens
+from granchain.ensembles import run as ens
 from granchain import bca
 
 SEED = 5

@@ -217,7 +217,7 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
 
 PADDING_SCRIPT = """
 import json, numba, numpy as np, granchain as gc
-from granchain._integrators import RunControls
+from granchain.solve.integrators import RunControls
 from granchain.backends.kernels import rkloop
 assert numba.config.DISABLE_JIT
 cases = {f"decorated N={k}": gc.decorated([0.3, 0.2, 0.35, 0.25, 0.3, 0.22][: k - 1]) for k in (2, 3, 4, 5, 6, 7)}

@@ -11,7 +11,8 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from granchain import _reproduce, analysis  # noqa: E402
+from granchain import analysis  # noqa: E402
+from granchain.paper import reproduce as _reproduce  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +82,7 @@ def test_report_html_has_unbroken_paragraphs_and_bounds(run):
 
 def test_rerun_reuses_stores(run, monkeypatch):
     out, res = run
-    from granchain import _ensemble
+    from granchain.ensembles import run as _ensemble
 
     def boom(*a, **k):
         raise AssertionError("a finished store was recomputed")

@@ -26,8 +26,8 @@ import xarray as xr
 import zarr
 
 import granchain as gc
-from granchain._lock import StoreLock
-from granchain._store import StoreRepairWarning
+from granchain.ensembles.lock import StoreLock
+from granchain.ensembles.store import StoreRepairWarning
 
 KW = dict(realizations=40, seed=1, chunk_size=10, progress=False, threads=1)
 VOLATILE = ("created", "history")
@@ -117,8 +117,8 @@ def test_lost_parameter_records_are_refused_with_the_fix(reference, tmp_path):
 
 
 def test_partial_store_reads_not_computed_everywhere(tmp_path):
-    from granchain._ensemble import EnsembleSpec, compute_chunk
-    from granchain._store import ZarrSink
+    from granchain.ensembles.run import EnsembleSpec, compute_chunk
+    from granchain.ensembles.store import ZarrSink
 
     spec = EnsembleSpec(gc.RandomDecorated(6), 40, 1, chunk_size=10)
     path = tmp_path / "partial.zarr"

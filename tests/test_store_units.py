@@ -14,7 +14,7 @@ import xarray as xr
 
 import granchain as gc
 from granchain import units
-from granchain._ensemble import default_time_grid
+from granchain.ensembles.run import default_time_grid
 
 pint = pytest.importorskip("pint")
 pint_xarray = pytest.importorskip("pint_xarray")
@@ -99,7 +99,7 @@ def test_single_run_datasets_parse():
 
 
 def test_figure_datasets_parse(decorated_store):
-    from granchain.figures import fig1, fig2, fig3
+    from granchain.paper.figures import fig1, fig2, fig3
 
     with xr.open_zarr(decorated_store, consolidated=False) as ds:
         ds = ds.load()
@@ -135,7 +135,8 @@ def test_stores_from_before_the_attribute_still_convert():
 
 
 def test_theory_and_validity_datasets_parse(tmp_path, private_theory_cache):
-    from granchain import theory, validity
+    from granchain import theory
+    from granchain.paper import validity
 
     pred = theory.predict(gc.Uniform(0.01, 0.4), 6, memory=2, nodes=3, samples=500, profile_windows=50)
     assert_units_parse(pred, "theory")

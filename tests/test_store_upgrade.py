@@ -15,7 +15,7 @@ import pytest
 import xarray as xr
 
 import granchain as gc
-from granchain._store import StoreRepairWarning, check_same_parameters, current_record
+from granchain.ensembles.store import StoreRepairWarning, check_same_parameters, current_record
 from granchain._version import RESULTS_VERSION
 
 DATA = Path(__file__).parent / "data"
@@ -101,7 +101,7 @@ def test_an_interrupted_040_store_is_finished_bitwise(tmp_path):
 
 
 def test_the_record_names_the_results_version_not_the_package_version():
-    from granchain._ensemble import EnsembleSpec
+    from granchain.ensembles.run import EnsembleSpec
 
     record = EnsembleSpec(gc.RandomDecorated(4), realizations=2).describe()
     assert record["results_version"] == RESULTS_VERSION and "granchain_version" not in record
@@ -114,7 +114,7 @@ def test_the_record_names_the_results_version_not_the_package_version():
     ({"results_version": RESULTS_VERSION + 1}, f"results_version: stored {RESULTS_VERSION + 1}"),
 ])
 def test_other_results_versions_are_refused(stored, words):
-    from granchain._ensemble import EnsembleSpec
+    from granchain.ensembles.run import EnsembleSpec
 
     spec = EnsembleSpec(gc.RandomDecorated(4), realizations=2)
     record = {k: v for k, v in spec.describe().items() if k != "results_version"} | stored

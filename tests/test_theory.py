@@ -134,13 +134,13 @@ def test_predict_reads_and_runs_no_ensemble(monkeypatch):
     ensemble is run."""
     import xarray as xr
 
-    import granchain._ensemble
+    import granchain.ensembles.run
 
     def refuse(*args, **kwargs):
         raise AssertionError("predict must not read or run an ensemble")
 
     for mod, name in ((xr, "open_zarr"), (xr, "open_dataset"), (xr, "open_mfdataset"), (gc, "run_ensemble"),
-                      (granchain._ensemble, "run_ensemble")):
+                      (granchain.ensembles.run, "run_ensemble")):
         monkeypatch.setattr(mod, name, refuse)
     ds = theory.predict(PAPER, 6, **SMALL)
     assert np.all(np.isfinite(ds["mean_peak_velocity"].values))

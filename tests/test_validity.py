@@ -13,8 +13,8 @@ import xarray as xr
 from scipy import stats
 
 import granchain as gc
-from granchain import validity
-from granchain._distributions import distribution_from_record
+from granchain.paper import validity
+from granchain.model.distributions import distribution_from_record
 
 SMALL = dict(alphas=(0.01,), betas=(0.2, 0.4, 0.9), n_large=(6,), realizations=60, blocks=5, seed=11, progress=False)
 
@@ -134,7 +134,7 @@ def test_figure_has_labels_colour_bars_and_contours(tmp_path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from granchain.figures import validity as figure
+    from granchain.paper.figures import validity as figure
 
     ds = figure.compute(tmp_path, alphas=(0.01, 0.2), betas=(0.3, 0.6, 0.9), n_large=(5,), realizations=20, blocks=2,
                         progress=False, netcdf=False)

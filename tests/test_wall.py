@@ -163,7 +163,7 @@ def test_wall_family_ensemble_rows_are_simulate():
     ds = gc.run_ensemble(fam, realizations=4, seed=9, chunk_size=3, progress=False)
     assert (ds["status"] == 0).all()
     assert ds.attrs["granchain_family"].count('"wall": true') == 1
-    from granchain._ensemble import ensemble_integrator
+    from granchain.ensembles.run import ensemble_integrator
 
     for name in fam.chains:
         res = gc.simulate(fam.chain(9, 3, name), ensemble_integrator(name), t_grid=ds["time"].values)

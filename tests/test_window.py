@@ -48,10 +48,10 @@ from hypothesis import strategies as hs
 
 import granchain as gc
 from conftest import in_order
-from granchain import _ensemble as ens
-from granchain._integrators import RELAXED_FACTOR, RELAXED_LAG, WINDOW_LAG, RunControls, integrator_from_record
+from granchain.ensembles import run as ens
+from granchain.solve.integrators import RELAXED_FACTOR, RELAXED_LAG, WINDOW_LAG, RunControls, integrator_from_record
 from granchain.backends.kernels.records import INFO_FROZEN_POTENTIAL, INFO_STEPS, INFO_WINDOW_START
-from granchain._simulate import default_t_max
+from granchain.solve.simulate import default_t_max
 
 N = 26
 KINDS = ("decorated", "effective")
@@ -513,7 +513,7 @@ def test_store_written_exact_is_resumed_with_the_exact_dp5(tmp_path):
     """A store written with the exact DP5 (an interrupted run: one chunk of two done; then one extended)
     is continued with integrator=DP5(1e-6, 1e-9) to bitwise a fresh run; the relaxed default is another
     integrator and is refused with a hint naming the exact DP5."""
-    from granchain._store import ZarrSink
+    from granchain.ensembles.store import ZarrSink
 
     family = gc.RandomDecorated(8)
     kw = dict(seed=3, chunk_size=5, progress=False, integrator=gc.DP5(1e-6, 1e-9))

@@ -56,7 +56,7 @@ class Backend:
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
                         controls, scale: float, out: dict) -> None:
         """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time."""
-        from .._chain import Chain
+        from ..model.chain import Chain
         from .kernels.aligned import accumulate_aligned
         from .kernels.batch import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces
         from .kernels.forces import final_energy, impulse_energy

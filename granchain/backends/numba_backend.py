@@ -82,7 +82,7 @@ class NumbaBackend(Backend):
                         controls, scale: float, out: dict) -> None:
         import numba
 
-        from .._chain import Chain
+        from ..model.chain import Chain
 
         integrator.check_chains(masses, stiffness, n, initial_velocity)
         first = Chain(masses[0], stiffness[0], n, initial_velocity[0], observed)  # the model the rows share

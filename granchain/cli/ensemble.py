@@ -19,7 +19,7 @@ DEFAULT_INTERVAL = {"decorated": (0.01, 0.4), "tapered-decorated": (0.01, 0.4), 
 
 
 def add_parser(subparsers) -> None:
-    from .._integrators import INTEGRATORS
+    from ..solve.integrators import INTEGRATORS
     from .pulse import taking
 
     families = "\n".join(f"  {name:<18} {text}" for name, text in FAMILY_HELP.items())
@@ -129,7 +129,7 @@ def _pair(text: str) -> tuple:
 
 def build_family(args):
     """The chain family the arguments describe."""
-    from .._distributions import Uniform
+    from ..model.distributions import Uniform
     from ..families import BinaryRandom, RandomDecorated, RandomRadii, TaperedDecorated
 
     lo, hi = DEFAULT_INTERVAL.get(args.family, (None, None))
@@ -153,8 +153,8 @@ def build_integrator(args, chains):
     --integrator set DP5's (as ``run_ensemble(rtol=...)``)."""
     import dataclasses
 
-    from .._ensemble import SMOOTH_ATOL, SMOOTH_RTOL, ensemble_integrator
-    from .._integrators import DP5, INTEGRATORS, WINDOW_LAG
+    from ..ensembles.run import SMOOTH_ATOL, SMOOTH_RTOL, ensemble_integrator
+    from ..solve.integrators import DP5, INTEGRATORS, WINDOW_LAG
 
     cls = None if args.integrator is None else INTEGRATORS[args.integrator]
     given = {"rtol": args.rtol, "atol": args.atol, "dt": args.step}
@@ -209,7 +209,7 @@ def _physical_summary(ds, scale) -> str:
 def run(args) -> int:
     import numpy as np
 
-    from .._ensemble import run_ensemble
+    from ..ensembles.run import run_ensemble
     from ._units import scale_from_args
 
     check_arguments(args)

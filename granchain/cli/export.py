@@ -80,7 +80,7 @@ def export(store, file, force: bool = False) -> str:
 
     import xarray as xr
 
-    from .._store import stored_parameters
+    from ..ensembles.store import stored_parameters
 
     try:
         import netCDF4  # noqa: F401

@@ -43,8 +43,8 @@ def summary(path: str) -> dict:
     import numpy as np
     import zarr
 
-    from .._lock import StoreLock
-    from .._store import check_chunk, stored_parameters
+    from ..ensembles.lock import StoreLock
+    from ..ensembles.store import check_chunk, stored_parameters
 
     if not os.path.isdir(path):
         raise ValueError(f"{path} is not a directory: give the path of a Zarr store written by granchain ensemble")

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from .._integrators import INTEGRATORS
+from ..solve.integrators import INTEGRATORS
 from ._units import add_unit_arguments, scale_from_args
 
 

@@ -31,7 +31,7 @@ MIN_REALIZATIONS = 20
 def run(args) -> int:
     import os
 
-    from .._reproduce import reproduce
+    from ..paper.reproduce import reproduce
     from .ensemble import connect
 
     if args.realizations < MIN_REALIZATIONS:

@@ -123,8 +123,8 @@ def run(args) -> int:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from ..figures import save
-        from ..figures import theory as figure
+        from ..paper.figures import save
+        from ..paper.figures import theory as figure
 
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

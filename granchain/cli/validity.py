@@ -51,9 +51,9 @@ def run(args) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .. import validity
-    from ..figures import save
-    from ..figures import validity as figure
+    from ..paper import validity
+    from ..paper.figures import save
+    from ..paper.figures import validity as figure
 
     base = dict(validity.QUICK) if args.quick else {"alphas": validity.DEFAULT_ALPHAS, "betas": validity.DEFAULT_BETAS,
                                                     "n_large": (6, 26), "realizations": validity.DEFAULT_REALIZATIONS}

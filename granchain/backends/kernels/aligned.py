@@ -4,7 +4,7 @@ For lags tau_l the kernel adds round(v_k(t_peak[k] + tau_l) * scale) and its squ
 int64 sums, like the averaged pulse <v_k(t)> (``_ensemble.accumulate_fixed_point``): the
 aligned mean <v_k(t_k^peak + tau)> is then bitwise independent of threads, chunks and workers.
 It is the pulse shape without the dephasing of realisations (level 1 of the
-averaged-pulse decay; see :mod:`granchain.dephasing`).
+averaged-pulse decay; see :mod:`granchain.paper.dephasing`).
 
 v_k(t_peak + tau) is interpolated from the realisation's velocities on the ensemble's time
 grid (``grid_v`` (T, K), which the batch kernel has anyway) by the cubic Lagrange polynomial

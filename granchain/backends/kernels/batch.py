@@ -115,7 +115,7 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
         c = stiffness[r]
         x = np.zeros(M)
         v = np.zeros(M)
-        v[0] = v_init[r]  # the impulse on granule 1 (granchain.model.Impulse)
+        v[0] = v_init[r]  # the impulse on granule 1 (granchain.model.contacts.Impulse)
         grid_v = np.zeros((T, K))
         pf = np.zeros(M - 1)
         pft = np.zeros(M - 1)

@@ -8,7 +8,7 @@ A rigid wall at the far end is a last granule of infinite mass (inverse mass 0, 
 stiffness sqrt(2 R_M), the limit of Eq. r-prime): it never moves, and the same force routines
 serve it; the stop rule (``stop``) and the energy and momentum sums (which skip it) know about it.
 
-The forces depend on positions only (``granchain.model.PowerLaw.conservative``): that is what
+The forces depend on positions only (``granchain.model.contacts.PowerLaw.conservative``): that is what
 licenses the Nystrom method (``rkn4``) and Verlet, and the potential energy below.
 """
 
@@ -86,7 +86,7 @@ def acceleration_of(x, k, fm):
 @njit(**JIT)
 def impulse_energy(m0, v0):
     """The energy of the initial state, all kinetic: granule 1 struck with v0, the rest at rest
-    (``granchain.model.Impulse``)."""
+    (``granchain.model.contacts.Impulse``)."""
     return 0.5 * m0 * v0 * v0
 
 

@@ -15,9 +15,9 @@ from __future__ import annotations
 from collections import namedtuple
 
 #: The model's scalar parameters, passed whole through every kernel that reads any of them: ``n`` the
-#: exponent of the power-law contact (granchain.model.PowerLaw); ``power`` its fast-path code
+#: exponent of the power-law contact (granchain.model.contacts.PowerLaw); ``power`` its fast-path code
 #: (``forces.power_code``); ``wall`` whether the far end is a rigid wall (the boundary value of the
-#: chain, ``granchain.model.RigidWall``: asked here once, not re-derived from the infinite mass).
+#: chain, ``granchain.model.contacts.RigidWall``: asked here once, not re-derived from the infinite mass).
 #: A new physics parameter is one more field here, filled in one place
 #: (``granchain.backends.numba_backend.model_params``), and the kernels that need it read it by name:
 #: no signature between them changes (``tests/test_backends.py`` checks this).

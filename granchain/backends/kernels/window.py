@@ -1,7 +1,7 @@
 """The active window: which granules are integrated.
 
 ``hi``: granules hi..M-1 are exactly at rest and uncompressed (the initial state's promise,
-``granchain.model.Impulse.rest_ahead``), so only granules 0..hi-1 are integrated. A Runge-Kutta
+``granchain.model.contacts.Impulse.rest_ahead``), so only granules 0..hi-1 are integrated. A Runge-Kutta
 step spreads motion by at most a few granules per step (one per two stages), so the window is kept
 ``WINDOW_MARGIN`` granules ahead of the last moving one; with that margin the windowed integration
 is identical, bit for bit, to integrating all granules.

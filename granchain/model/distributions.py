@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import integrate
 
-from ._validate import EFFECTIVE_VALIDITY_LIMIT, finite_scalar, warn_effective_validity
+from .._validate import EFFECTIVE_VALIDITY_LIMIT, finite_scalar, warn_effective_validity
 
 __all__ = ["Uniform", "Truncated", "Mixture", "as_distribution", "distribution_from_record", "small_radius_distribution"]
 

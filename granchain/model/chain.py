@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._validate import count, exponent, finite_scalar, positive_array
-from .model import FreeEnd, Impulse, PowerLaw, RigidWall
+from .._validate import count, exponent, finite_scalar, positive_array
+from .contacts import FreeEnd, Impulse, PowerLaw, RigidWall
 
 __all__ = [
     "Chain",
@@ -76,11 +76,11 @@ class Chain:
 
     Attributes
     ----------
-    contact : granchain.model.PowerLaw
+    contact : granchain.model.contacts.PowerLaw
         The contact law (exponent ``n``).
-    boundary : granchain.model.FreeEnd or granchain.model.RigidWall
+    boundary : granchain.model.contacts.FreeEnd or granchain.model.contacts.RigidWall
         The far end (a wall when the last mass is infinite).
-    initial : granchain.model.Impulse
+    initial : granchain.model.contacts.Impulse
         The initial state: granule 1 struck with ``initial_velocity``, the rest at rest.
     """
 

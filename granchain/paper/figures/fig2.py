@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import analysis
-from ..units import rescaled_attrs
+from ... import analysis
+from ...units import rescaled_attrs
 from ._style import COLORS, MARKERS, VELOCITY_UNITS, panel_pair
 
 

@@ -1,7 +1,7 @@
 """Validity maps: heat maps over the small-radius range [alpha, beta] of how far the
 effective chain and the BCA are from the decorated chain, with the 1 % and 5 % contours.
 
-``compute(out, ...)`` runs (or resumes) :func:`granchain.validity.validity_map`; ``plot(ds)`` draws
+``compute(out, ...)`` runs (or resumes) :func:`granchain.paper.validity.validity_map`; ``plot(ds)`` draws
 one panel per measure (rows) and N (columns).
 """
 
@@ -22,7 +22,7 @@ PANELS = (
 
 
 def compute(out, **kwargs):
-    """The validity map Dataset (``granchain.validity.validity_map(out, **kwargs)``)."""
+    """The validity map Dataset (``granchain.paper.validity.validity_map(out, **kwargs)``)."""
     return validity.validity_map(out, **kwargs)
 
 

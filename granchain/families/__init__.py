@@ -36,11 +36,11 @@ from typing import Callable, ClassVar, NamedTuple
 
 import numpy as np
 
-from ._chain import HERTZ, Chain, decorated, from_radii, sphere_mass, sphere_stiffness, wall_stiffness
-from ._distributions import as_distribution, distribution_from_record, small_radius_distribution
-from ._effective import effective, effective_parameters
-from ._random import realization_rng
-from ._validate import count, exponent, finite_scalar
+from ..model.chain import HERTZ, Chain, decorated, from_radii, sphere_mass, sphere_stiffness, wall_stiffness
+from ..model.distributions import as_distribution, distribution_from_record, small_radius_distribution
+from ..model.effective import effective, effective_parameters
+from ..model.random import realization_rng
+from .._validate import count, exponent, finite_scalar
 
 __all__ = [
     "FAMILIES",
@@ -215,7 +215,7 @@ class ChainFamily:
     def default_time_grid(self, dt: float = 0.1) -> np.ndarray:
         """Times of the averaged pulse: 0 to 1.3 x the BCA arrival time at the last observed granule
         (the largest over 8 fixed sample realisations) + 10."""
-        from . import bca
+        from .. import bca
 
         dt = finite_scalar("dt", dt, positive=True)
         t_arrival = 0.0
@@ -279,7 +279,7 @@ class _Decorated(ChainFamily):
     def arrival_ratio(self) -> float:
         """BCA arrival time at granule N of this family's effective chains over that of the same radius
         ratios between unit large granules (8 fixed sample realisations; exactly 1 without a taper)."""
-        from . import bca
+        from .. import bca
 
         rng = np.random.default_rng(0)
         with warnings.catch_warnings():

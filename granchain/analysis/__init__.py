@@ -33,7 +33,7 @@ __all__ = [
     "CurveComparison", "stretched_exp", "fit_stretched_exp", "fit_linear", "histogram",
     "ks_distance", "ks_normal", "skewness", "quantile_skewness", "format_pvalue", "pulse_peak", "mean_peak_amplitude", "averaged_pulse_peak",
     "mean_arrival_time", "arrival_times", "out_of_order_peaks", "compare_curves",
-    # jackknife (granchain._jackknife) and averaged-pulse fits (granchain._pulsefits)
+    # jackknife (granchain.analysis.jackknife) and averaged-pulse fits (granchain.analysis.pulsefits)
     "Jackknife", "ChunkSums", "block_labels", "jackknife_stderr", "block_jackknife", "chunk_jackknife",
     "PulseFit", "CurveAgreement", "pulse_means", "pulse_jackknife", "fit_averaged_decay", "fit_averaged_arrival",
     "paper_curve_agreement", "rounding_envelope", "averaged_peak_gap",
@@ -641,11 +641,11 @@ def compare_curves(f, g, x) -> CurveComparison:
     return CurveComparison(float(rel[i]), float(x[i]), float(np.max(diff)), pull)
 
 
-# The jackknife (granchain._jackknife, which needs nothing from here) is re-exported as it is. The
-# averaged-pulse fits (granchain._pulsefits) build on the functions above, so they are offered
+# The jackknife (granchain.analysis.jackknife, which needs nothing from here) is re-exported as it is. The
+# averaged-pulse fits (granchain.analysis.pulsefits) build on the functions above, so they are offered
 # here lazily (PEP 562 module __getattr__): importing this module does not import them, and the
 # package's import graph has no cycle (tests/test_imports.py).
-from ._jackknife import (  # noqa: E402
+from .jackknife import (  # noqa: E402
     ChunkSums, Jackknife, block_jackknife, block_labels, chunk_jackknife, jackknife_stderr,
 )
 
@@ -655,7 +655,7 @@ _PULSEFITS = ("CurveAgreement", "PulseFit", "averaged_peak_gap", "fit_averaged_a
 
 def __getattr__(name):
     if name in _PULSEFITS:
-        from . import _pulsefits
+        from . import pulsefits as _pulsefits
 
         return getattr(_pulsefits, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

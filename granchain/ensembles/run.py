@@ -2,9 +2,9 @@
 
 An ensemble is a chain family (:mod:`granchain.families`: how realisation i draws its random
 parameters from (seed, i) and becomes a chain) integrated by any registered integrator
-(:mod:`granchain._integrators`, through ``Integrator.integrate_batch``). Work is split into
+(:mod:`granchain.solve.integrators`, through ``Integrator.integrate_batch``). Work is split into
 chunks of realisations. A chunk is computed locally (Numba threads) or as a task on a Dask
-cluster, and its results are written into the store (:mod:`granchain._store`) before it counts
+cluster, and its results are written into the store (:mod:`granchain.ensembles.store`) before it counts
 as done. An interrupted run started again with the same arguments skips the done chunks;
 redone chunks overwrite their own slots, so nothing is counted twice and the result is
 bitwise identical to an uninterrupted run.
@@ -20,13 +20,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._chain import HERTZ
-from ._integrators import DP5, RKN4, Integrator, RunControls, get_integrator
-from ._simulate import time_limit
-from ._store import MemorySink, ZarrSink
-from ._validate import count
-from ._version import RESULTS_VERSION
-from .families import ChainFamily, RandomDecorated
+from ..model.chain import HERTZ
+from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
+from ..solve.simulate import time_limit
+from .store import MemorySink, ZarrSink
+from .._validate import count
+from .._version import RESULTS_VERSION
+from ..families import ChainFamily, RandomDecorated
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
 
@@ -230,7 +230,7 @@ def _merge(parts: list, family) -> dict:
     """One chunk's result from the results of consecutive batches of its realisations: per-realisation
     arrays are joined along their ``realization`` axis (read from the store schema), the fixed-point
     sums added. An array the schema does not name is an error, never a silent wrong join."""
-    from ._store import per_realisation_variables
+    from .store import per_realisation_variables
 
     if len(parts) == 1:
         return parts[0]
@@ -244,7 +244,7 @@ def _merge(parts: list, family) -> dict:
         elif key in axis:
             out[key] = np.concatenate([p[key] for p in parts], axis=axis[key])
         else:
-            raise KeyError(f"chunk result {key!r} is neither a store variable nor a sum: add it to the schema (_store.py)")
+            raise KeyError(f"chunk result {key!r} is neither a store variable nor a sum: add it to the schema (granchain/ensembles/store.py)")
     return out
 
 
@@ -402,7 +402,7 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     lags : array, optional
         Also accumulate the *aligned* pulse <v_k(t_k^peak + tau)> on these lags tau (times relative
         to each realisation's own peak time at k; variables ``aligned_velocity``,
-        ``aligned_velocity_stderr`` with dim ``lag``; see :mod:`granchain.dephasing`).
+        ``aligned_velocity_stderr`` with dim ``lag``; see :mod:`granchain.paper.dephasing`).
         Default None: not accumulated (the store is then exactly as without this option).
 
     Ctrl-C raises :class:`EnsembleInterrupted` (a KeyboardInterrupt) whose message says where the

@@ -13,8 +13,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from . import analysis, bca
-from ._distributions import Uniform
+from .. import analysis, bca
+from ..model.distributions import Uniform
 
 #: The paper's printed numbers (as printed: the digits set the rounding tolerance).
 PAPER = {"a": "0.756", "b": "0.067", "c": "0.714", "a'": "0.744", "b'": "0.035", "c'": "0.714",

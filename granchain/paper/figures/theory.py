@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import analysis
+from ... import analysis
 from ._style import COLORS, VELOCITY_UNITS
 
-REFERENCE = Path(__file__).resolve().parents[1] / "_data" / "theory_reference_U001_04_N26.nc"
+REFERENCE = Path(__file__).resolve().parents[2] / "_data" / "theory_reference_U001_04_N26.nc"
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,7 +46,7 @@ def _measured(measured, distribution, n_large):
     import xarray as xr
 
     if measured is None:
-        from .._distributions import Uniform
+        from ...model.distributions import Uniform
 
         if REFERENCE.exists() and distribution == Uniform(0.01, 0.4) and n_large == 26:
             ref = xr.open_dataset(REFERENCE).load()
@@ -64,8 +64,8 @@ def compute(distribution=None, n_large: int = 26, *, n: float = 2.5, prediction=
             fit_range=None) -> TheoryFigureData:
     """Prediction, negative control, measured values (store path, Dataset, or the bundled reference
     for U[0.01, 0.4], N = 26) and the stretched-exponential fit of the predicted averaged peaks."""
-    from .. import theory
-    from .._distributions import as_distribution
+    from ... import theory
+    from ...model.distributions import as_distribution
 
     dist = as_distribution(distribution)
     pred = theory.predict(dist, n_large, n) if prediction is None else prediction

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import analysis, bca
-from ..units import rescaled_attrs
+from ... import analysis, bca
+from ...units import rescaled_attrs
 from ._style import COLORS, MARKERS, panel_pair
 
 
@@ -27,8 +27,8 @@ def _bca_slope(ds) -> float:
     uniform distribution, quadrature (:func:`granchain.bca.slope`) for any other. NaN for a
     family Eq. (slope) does not describe (it assumes unit large granules: undecorated and tapered
     families)."""
-    from .._distributions import Uniform
-    from ..families import RandomDecorated, family_from_dataset
+    from ...model.distributions import Uniform
+    from ...families import RandomDecorated, family_from_dataset
 
     family = family_from_dataset(ds)
     if not isinstance(family, RandomDecorated):

@@ -3,7 +3,7 @@
 Re-exported by :mod:`granchain.analysis`. The paper's Fig. 2 (v_k = a exp(-b k^c)) and Fig. 3
 (t = slope k + intercept) are unweighted least-squares fits to the peak max_t <v_k(t)> of the
 averaged pulse and to its time. Their uncertainties come from a jackknife over the store's
-chunks of realisations (:class:`~granchain._jackknife.ChunkSums`): every replicate refits the
+chunks of realisations (:class:`~granchain.analysis.jackknife.ChunkSums`): every replicate refits the
 leave-one-chunk-out averaged pulse, so the correlation between granules is included. Without
 per-chunk sums (an in-memory Dataset) the errors fall back to the fit residuals, and
 ``method`` says so: residual errors measure how well the model describes the curve, not the
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import analysis as _A
-from ._jackknife import ChunkSums, Jackknife, chunk_jackknife
+from .. import analysis as _A
+from .jackknife import ChunkSums, Jackknife, chunk_jackknife
 
 __all__ = ["PulseFit", "CurveAgreement", "pulse_means", "pulse_jackknife", "fit_averaged_decay",
            "fit_averaged_arrival", "paper_curve_agreement", "rounding_envelope", "averaged_peak_gap"]

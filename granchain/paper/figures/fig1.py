@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..units import rescaled_attrs
+from ...units import rescaled_attrs
 from ._style import COLORS, TIME_LABEL, VELOCITY_UNITS, axes
 
 

@@ -19,7 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._validate import count, finite_scalar
+from .._validate import count, finite_scalar
 
 __all__ = ["Integrator", "DP5", "RKN4", "Verlet", "VerletStabilityWarning", "verlet_omega_max", "DOP853", "INTEGRATORS", "RunControls", "get_integrator"]
 
@@ -110,7 +110,7 @@ class Integrator:
         its peak velocity and time and its velocities on ``t_grid`` (time-major), per contact (M - 1)
         its peak force and time, and the wall force on the grid (zeros without a wall).
         """
-        from .backends import get_backend
+        from ..backends import get_backend
 
         return get_backend(self.backend).integrate(self, chain, x, v, t_grid=t_grid, t_max=t_max,
                                                    stop_at_exit=stop_at_exit, controls=controls)
@@ -130,7 +130,7 @@ class Integrator:
         ``out["lags"]`` (L,), also adds the aligned pulse's sums to ``["sum_a"]``/``["sum_a2"]``
         (L, K) (``granchain.backends.kernels.aligned``).
         """
-        from .backends import get_backend
+        from ..backends import get_backend
 
         get_backend(self.backend).integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts,
                                                   t_grid=t_grid, t_max=t_max, controls=controls, scale=scale, out=out)
@@ -249,7 +249,7 @@ class DP5(Integrator):
     def relaxed(cls, rtol: float | None = None, atol: float | None = None) -> "DP5":
         """The method with the validated relaxed zone: granules more than 4 observed granules behind
         the front at 1000 times looser tolerances; every granule integrated to the end
-        (``RELAXED_LAG``, ``RELAXED_FACTOR`` in ``granchain._integrators``). ``rtol``, ``atol`` default
+        (``RELAXED_LAG``, ``RELAXED_FACTOR`` in ``granchain.solve.integrators``). ``rtol``, ``atol`` default
         to the method's validated ``goal_tolerances`` (DP5: 1e-6, 1e-9; RKN4: 1e-5, 1e-8)."""
         return cls(*cls._goal_tolerances(rtol, atol), relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)
 
@@ -334,7 +334,7 @@ class Verlet(Integrator):
 
     Stability: velocity Verlet is stable only for dt * omega_max <= 2, omega_max the chain's highest
     linearised angular frequency. Before integrating, ``dt`` is checked against the safe upper bound
-    of ``granchain._integrators.verlet_omega_max`` (every contact at most as compressed as if it held all the pulse's
+    of ``granchain.solve.integrators.verlet_omega_max`` (every contact at most as compressed as if it held all the pulse's
     energy; Gershgorin bound of M^-1 K); a :class:`granchain.VerletStabilityWarning` is issued when
     dt * omega_max > 2 (the bound is conservative: near it, compare with a smaller dt or DP5).
     Not checked for n < 2, where the contact stiffness has no bound.

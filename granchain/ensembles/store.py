@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._status import NOT_COMPUTED, Status, describe_codes
-from ._version import RESULTS_OF_VERSION, __version__
-from .units import RESCALED, rescaled_attrs
+from .._status import NOT_COMPUTED, Status, describe_codes
+from .._version import RESULTS_OF_VERSION, __version__
+from ..units import RESCALED, rescaled_attrs
 
 __all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "MemorySink",
            "ZarrSink", "StoreRepairWarning", "stored_record", "check_same_parameters", "checked_variables", "result_variables",
@@ -433,7 +433,7 @@ class ZarrSink:
     """
 
     def __init__(self, spec, path, resume: bool = True, log=None):
-        from ._lock import StoreLock
+        from .lock import StoreLock
 
         self.spec, self.path = spec, _check_out(path)
         self.log = log or (lambda message: None)
@@ -767,7 +767,7 @@ def _check_out(path) -> str:
 def _current_family_record(record: dict) -> dict:
     """The record today's granchain writes for the family an earlier version recorded (records whose
     fields changed meaning, such as TaperedDecorated's q, are read in their own version's meaning)."""
-    from .families import family_from_record
+    from ..families import family_from_record
 
     try:
         return family_from_record(record).describe()

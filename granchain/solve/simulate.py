@@ -6,13 +6,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._chain import Chain
-from ._integrators import RunControls, get_integrator
-from .backends.kernels.forces import final_energy, total_momentum
-from .backends.kernels.records import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END
-from ._status import Status
-from ._validate import finite_scalar
-from .units import rescaled_attrs
+from ..model.chain import Chain
+from .integrators import RunControls, get_integrator
+from ..backends.kernels.forces import final_energy, total_momentum
+from ..backends.kernels.records import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END
+from .._status import Status
+from .._validate import finite_scalar
+from ..units import rescaled_attrs
 
 __all__ = ["Status", "PulseResult", "simulate", "default_t_max"]
 

@@ -14,11 +14,11 @@ import json
 import time
 from pathlib import Path
 
-from . import __version__, analysis
-from ._distributions import Uniform
-from ._ensemble import default_time_grid, run_ensemble
-from ._report import Record, build_records, markdown_table
-from ._store import stored_record
+from .. import __version__, analysis
+from ..model.distributions import Uniform
+from ..ensembles.run import default_time_grid, run_ensemble
+from .report import Record, build_records, markdown_table
+from ..ensembles.store import stored_record
 
 PAPER_N = (6, 11, 16, 26)
 CITATION = ("U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg, "
@@ -72,7 +72,11 @@ def figures(datasets: dict, out: Path, quick: bool, sums_by_N: dict | None = Non
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .figures import fig1, fig2, fig3, fig4, save
+    from .figures import save
+    from .figures import fig1
+    from .figures import fig2
+    from .figures import fig3
+    from .figures import fig4
 
     N_fig1 = 11 if 11 in datasets else min(datasets)
     N_fig23 = 26 if 26 in datasets else max(datasets)
@@ -203,7 +207,7 @@ def write_report(out: Path, records: list[Record], meta: dict, figs: dict) -> tu
     body = [f"<h1>{esc(title)}</h1>"] + [f"<p>{esc(p)}</p>" for p in paras]
     body.append("<table border='1' cellspacing='0' cellpadding='4'><tr><th>section</th><th>quantity</th><th>range</th><th>paper</th>"
                 "<th>granchain</th><th>agrees</th><th>method</th><th>note</th></tr>")
-    from ._report import verdict
+    from .report import verdict
 
     for r in records:
         paper = "—" if r.paper is None else f"{r.paper:g}"

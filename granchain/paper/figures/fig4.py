@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import analysis, bca
+from ... import analysis, bca
 from ._style import COLORS, TIME_LABEL
 
 #: Grid cells (row, column) of the paper's panel order: upper left, then clockwise.

@@ -1,0 +1,19 @@
+"""The model: what a chain *is*, as values, before anything integrates it.
+
+- :mod:`~granchain.model.contacts`: the contact law (:class:`PowerLaw`, paper Eq. hertz-1), the far
+  boundary (:class:`FreeEnd`, :class:`RigidWall`) and the initial state (:class:`Impulse`), small
+  frozen values that declare the assumptions they license (forces depend on positions only, the
+  granules ahead of the pulse are exactly at rest, the pulse leaves for good);
+- :mod:`~granchain.model.chain`: :class:`~granchain.Chain` (masses, stiffnesses, exponent, the values
+  above) and its builders from radii (paper Sec. II, Eq. r-prime);
+- :mod:`~granchain.model.effective`: the decorated chain's effective chain (paper Sec. III A);
+- :mod:`~granchain.model.distributions`: small-radius distributions;
+- :mod:`~granchain.model.random`: random decorated chains drawn from (seed, realisation).
+
+Everything here is plain NumPy: solving (:mod:`granchain.solve`) and the compiled code
+(:mod:`granchain.backends`) read these values, never the other way round.
+"""
+
+from .contacts import FreeEnd, Impulse, PowerLaw, RigidWall
+
+__all__ = ["PowerLaw", "FreeEnd", "RigidWall", "Impulse"]
