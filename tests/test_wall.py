@@ -205,3 +205,44 @@ def test_cli_ensemble_wall_and_units(tmp_path, capsys):
     np.testing.assert_array_equal(ds["peak_wall_force"].values, api["peak_wall_force"].values)
     s = gc.units.scale(gc.units.STEEL, 5e-3, 1.0)
     assert ds.attrs["physical_force_unit_N"] == pytest.approx(s.force, rel=1e-15)
+
+
+@pytest.mark.parametrize("make", [gc.RKN4.relaxed, gc.DP5.windowed])
+def test_a_wall_that_switches_goal_control_off_says_so(make):
+    """A rigid wall sends the pulse back through the granules behind the front, so the relaxed zone and
+    the trailing window are switched off there (the results are the exact method's, bitwise). The
+    result must then say so: its integrator record has no goal-oriented zones and names why, in the
+    Dataset and the table; the free chain's record (negative control) keeps its zones and says nothing."""
+    import json
+
+    integ = make()
+    chain = gc.random_decorated(5, gc.Uniform(0.01, 0.4), seed=2)
+    walled = gc.simulate(chain.with_wall(), integ)
+    exact = gc.simulate(chain.with_wall(), type(integ)(integ.rtol, integ.atol))
+    np.testing.assert_array_equal(walled.peak_velocity, exact.peak_velocity)
+    record = walled.integrator_record
+    assert record["name"] == integ.name and "rigid wall" in record["goal_control"]
+    assert record.get("relaxed_lag") is None and record.get("window_lag") is None
+    assert json.loads(walled.to_dataset().attrs["integrator_record"]) == record
+    assert "goal-oriented error control off: the chain ends in a rigid wall" in walled.table()
+    free = gc.simulate(chain, integ)
+    assert "goal_control" not in free.integrator_record and free.integrator_record == integ.describe()
+    assert "goal-oriented" not in free.table()
+
+
+def test_a_walled_store_records_the_integrators_as_they_ran(tmp_path):
+    """An ensemble of chains against a wall stores, next to the integrators asked for, the ones that
+    ran (goal control off, and why); a free family's store records them unchanged."""
+    import json
+
+    fam = gc.RandomDecorated(4, gc.Uniform(0.01, 0.4), wall=True)
+    ds = gc.run_ensemble(fam, realizations=2, chunk_size=2, seed=1, progress=False, out=tmp_path / "w.zarr")
+    asked = json.loads(ds.attrs["granchain_integrator"])
+    ran = json.loads(ds.attrs["granchain_integrator_as_run"])
+    assert set(ran) == {"decorated", "effective"}
+    assert asked.get("relaxed_lag") is not None  # the ensemble default asks for a relaxed zone ...
+    for record in ran.values():  # ... which the wall switched off
+        assert record.get("relaxed_lag") is None and "rigid wall" in record["goal_control"]
+    free = gc.run_ensemble(gc.RandomDecorated(4, gc.Uniform(0.01, 0.4)), realizations=2, chunk_size=2, seed=1,
+                           progress=False, out=tmp_path / "f.zarr")
+    assert all("goal_control" not in r for r in json.loads(free.attrs["granchain_integrator_as_run"]).values())

@@ -23,16 +23,30 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator"]
+__all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run"]
 
 
 def effective_integrator(integrator, chain):
-    """The integrator as it actually runs on ``chain``: its goal-oriented zones (relaxed zone, trailing
-    window) switched off when the chain's boundary does not license them (a rigid wall sends the
-    pulse back through the granules behind the front), else ``integrator`` itself."""
-    if getattr(integrator, "goal_oriented", False) and not chain.boundary.licenses_goal_control:
+    """The integrator as it actually runs on ``chain`` (a :class:`granchain.Chain`, or its boundary
+    value): its goal-oriented zones (relaxed zone, trailing window) switched off when the boundary
+    does not license them (a rigid wall sends the pulse back through the granules behind the front),
+    else ``integrator`` itself."""
+    boundary = getattr(chain, "boundary", chain)
+    if integrator.goal_oriented and not boundary.licenses_goal_control:
         return dataclasses.replace(integrator, relaxed_lag=None, window_lag=None)
     return integrator
+
+
+def integrator_as_run(integrator, chain) -> dict:
+    """The record (``describe()``) of the integrator as it runs on ``chain`` (or at its boundary),
+    with ``"goal_control"`` saying why when the boundary switched its goal-oriented zones off: the
+    record a result carries next to the integrator that was asked for, so that it never claims a
+    control that did not run."""
+    ran = effective_integrator(integrator, chain)
+    record = ran.describe()
+    if ran is not integrator:
+        record["goal_control"] = f"off: {getattr(chain, 'boundary', chain).why_no_goal_control}"
+    return record
 
 
 class Backend:

@@ -192,6 +192,16 @@ def digest(values, dtype) -> int:
     return int.from_bytes(hashlib.blake2b(a.tobytes(), digest_size=8).digest(), "little", signed=True)
 
 
+def integrators_as_run(spec) -> dict:
+    """{chain kind: the record of its integrator as it runs on the family's chains}
+    (``granchain.backends.integrator_as_run``): derived from the parameters, so not compared on resume."""
+    from ..backends import integrator_as_run
+    from ..model.contacts import FreeEnd, RigidWall
+
+    boundary = RigidWall if spec.family.wall else FreeEnd
+    return {kind: integrator_as_run(integ, boundary) for kind, integ in spec.chain_integrators.items()}
+
+
 def _attrs(spec) -> dict:
     d = spec.describe()
     family = spec.family
@@ -213,6 +223,8 @@ def _attrs(spec) -> dict:
         "granchain_parameters": json.dumps(d, sort_keys=True),
         "granchain_family": json.dumps(d["family"], sort_keys=True),
         "granchain_integrator": json.dumps(integ, sort_keys=True),
+        # the integrators as they ran on the family's chains (a wall switches goal control off, and says why)
+        "granchain_integrator_as_run": json.dumps(integrators_as_run(spec), sort_keys=True),
         "granchain_version": __version__,
         "created": created,
         "family": family.kind,

@@ -63,6 +63,9 @@ class RigidWall:
 
     #: The pulse comes back through the granules behind the front: no relaxed zone, no trailing window.
     licenses_goal_control: ClassVar[bool] = False
+    #: What an integrator's record says when its goal-oriented control was switched off here.
+    why_no_goal_control: ClassVar[str] = ("the chain ends in a rigid wall, whose reflected pulse comes back through the "
+                                          "granules behind the front")
     wall: ClassVar[bool] = True
 
 

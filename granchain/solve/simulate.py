@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..backends import integrator_as_run
 from ..model.chain import Chain
 from .integrators import RunControls, get_integrator
 from ..backends.kernels.forces import final_energy, total_momentum
@@ -65,6 +67,9 @@ class PulseResult:
     peak_wall_force: float | None = None
     peak_wall_force_time: float | None = None
     wall_impulse: float | None = None
+    #: The integrator as it ran on this chain (``describe()``), with ``"goal_control"`` saying why
+    #: when the chain's boundary switched its relaxed zone and trailing window off (a rigid wall).
+    integrator_record: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -91,6 +96,8 @@ class PulseResult:
             + (f"momentum error {self.momentum_error:.2e}" if not self.chain.wall else
                f"wall: peak force {self.peak_wall_force:.9g} at t = {self.peak_wall_force_time:.6f}, impulse {self.wall_impulse:.9g}")
         )
+        if self.integrator_record and "goal_control" in self.integrator_record:
+            lines.append(f"# goal-oriented error control {self.integrator_record['goal_control']}")
         return "\n".join(lines)
 
     def to_dataset(self):
@@ -109,6 +116,8 @@ class PulseResult:
                 "n_steps": self.n_steps, "t_end": self.t_end, "chain_kind": self.chain.kind, "n": self.chain.n,
             },
         )
+        if self.integrator_record is not None:
+            ds.attrs["integrator_record"] = json.dumps(self.integrator_record, sort_keys=True)
         if self.velocity is not None:
             ds["velocity"] = (("granule", "time"), self.velocity, {**rescaled_attrs("velocity"), "long_name": "velocity"})
             ds = ds.assign_coords(time=("time", self.t_grid, {**rescaled_attrs("time"), "long_name": "time"}))
@@ -220,4 +229,5 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         peak_wall_force=float(peak_f[-1]) if wall else None,
         peak_wall_force_time=float(peak_ft[-1]) if wall else None,
         wall_impulse=float(p0 - p1) if wall else None,
+        integrator_record=integrator_as_run(integ, chain),
     )
