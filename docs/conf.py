@@ -93,12 +93,10 @@ _write_top_level_api()
 # docs/build) reports every unresolved reference; these are known and harmless:
 nitpick_ignore = [
     ("py:class", "enum.IntEnum"),                     # Status's base: no intersphinx (the build runs offline)
-    ("py:class", "granchain.analysis._Fit"),          # private base class of the fit results (analysis.py)
-    ("py:class", "granchain.model.distributions._Base"),   # private base class of Uniform/Truncated (_distributions.py)
-    ("py:class", "granchain.families._Decorated"),    # private base of RandomDecorated/TaperedDecorated (families.py)
-    ("py:class", "granchain.families._RadiiFamily"),  # private base of RandomRadii/BinaryRandom (families.py)
-    ("py:class", "granchain.solve.integrators._Compiled"), # private base of the compiled integrators DP5/Verlet
-    ("py:class", "Chain"),                            # bca.time_to_max_compression says `Chain`, not granchain.Chain
+    ("py:class", "granchain.analysis._Fit"),          # private base class of the fit results (analysis/__init__.py)
+    ("py:class", "granchain.model.distributions._Base"),   # private base class of Uniform/Truncated (model/distributions.py)
+    ("py:class", "granchain.families._Decorated"),    # private base of RandomDecorated/TaperedDecorated (families/__init__.py)
+    ("py:class", "granchain.families._RadiiFamily"),  # private base of RandomRadii/BinaryRandom (families/__init__.py)
     ("py:attr", "correlation"),                       # analysis.StretchedExpFit: backquoted attribute names
     ("py:meth", "stderr"),                            # analysis.StretchedExpFit / compare_curves: idem
 ]
@@ -115,5 +113,38 @@ def _escape_bars(app, what, name, obj, options, lines):
             lines[i] = line.replace("\\|", "|").replace("|", "\\|")
 
 
+def _resolve_in_enclosing_packages(app, env, node, contnode):
+    """Resolve a short name the way a reader of the module reads it.
+
+    A module's docstring names things by their short names: ``granchain.model.chain`` writes
+    :func:`wall_stiffness` and :meth:`Chain.with_wall`, ``granchain.backends.scipy_backend`` writes
+    :meth:`Backend.integrate_batch`, ``granchain.bca`` writes ``Chain``. The reference documents them
+    where they are public: re-exported by an enclosing package (``granchain.wall_stiffness``,
+    ``granchain.Chain.with_wall``, ``granchain.backends.Backend.integrate_batch``). Python's own
+    lookup stops at the module, so retry an unresolved name in each enclosing package, innermost
+    first; a name found nowhere stays unresolved and fails the build (-n)."""
+    if node.get("refdomain") != "py" or node.get("refspecific"):
+        return None
+    target, module = node["reftarget"], node.get("py:module") or ""
+    domain = env.get_domain("py")
+    parts = module.split(".")
+    for i in range(len(parts) - 1, 0, -1):
+        candidate = ".".join(parts[:i] + [target])
+        if candidate in domain.objects:
+            return domain.resolve_xref(env, node["refdoc"], app.builder, node["reftype"], candidate, node, contnode)
+    return None
+
+
+def _skip_namedtuple_fields(app, what, name, obj, skip, options):
+    """The kernels' records (granchain.backends.kernels.records) are named tuples: their fields are
+    named in the class signature and described in its docstring, so skip the "Alias for field number
+    N" entries Python generates for each."""
+    if (getattr(obj, "__doc__", None) or "").startswith("Alias for field number"):
+        return True
+    return None
+
+
 def setup(app):
     app.connect("autodoc-process-docstring", _escape_bars, priority=400)
+    app.connect("autodoc-skip-member", _skip_namedtuple_fields)
+    app.connect("missing-reference", _resolve_in_enclosing_packages)

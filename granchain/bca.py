@@ -40,11 +40,11 @@ from typing import NamedTuple
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from ._validate import count, exponent, finite_scalar, warn_effective_validity
 from .model.chain import HERTZ, Chain
 from .model.distributions import Uniform, small_radius_distribution
 from .model.effective import effective, effective_parameters
 from .model.random import draw_small_radii
-from ._validate import count, exponent, finite_scalar, warn_effective_validity
 
 __all__ = [
     "APPROXIMATIONS",

@@ -54,11 +54,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ._validate import count, exponent
+from ._version import __version__
 from .model.chain import HERTZ
 from .model.distributions import small_radius_distribution
 from .model.effective import effective_parameters
-from ._validate import count, exponent
-from ._version import __version__
 from .units import rescaled_attrs
 
 __all__ = ["TheorySettings", "TransferTable", "stiffness_quadrature", "transfer_table", "formation_factors",

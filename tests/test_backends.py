@@ -41,12 +41,12 @@ from typing import ClassVar
 
 import numpy as np
 import pytest
+from conftest import in_order
 
 import granchain as gc
-from conftest import in_order
-from granchain.solve.integrators import INTEGRATORS
 from granchain.backends import BACKENDS, effective_integrator, get_backend
 from granchain.model.contacts import PowerLaw
+from granchain.solve.integrators import INTEGRATORS
 
 # -- 1. conformance ---------------------------------------------------------------------------------
 #: The chains every integrator runs (built lazily, once).

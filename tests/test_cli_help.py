@@ -7,8 +7,8 @@ import re
 
 import pytest
 
-from granchain.solve.integrators import INTEGRATORS
 from granchain.cli import SUBCOMMANDS, main
+from granchain.solve.integrators import INTEGRATORS
 
 
 def help_text(capsys, command: str) -> str:

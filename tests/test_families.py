@@ -21,9 +21,9 @@ import scipy.stats as st
 import xarray as xr
 
 import granchain as gc
+from granchain.cli import main as cli_main
 from granchain.ensembles import run as ens
 from granchain.ensembles.store import StoreRepairWarning
-from granchain.cli import main as cli_main
 
 DATA = Path(__file__).parent / "data"
 SEED = 11

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 import granchain as gc
-from granchain.ensembles import run as ens
 from granchain import bca
+from granchain.ensembles import run as ens
 
 SEED = 5
 

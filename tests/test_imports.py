@@ -103,8 +103,8 @@ def test_granchain_imports_have_no_cycle():
 
 @pytest.mark.parametrize("name", ["fit_averaged_decay", "PulseFit", "paper_curve_agreement", "ChunkSums"])
 def test_analysis_still_offers_the_fits(name):
-    import granchain.analysis.pulsefits as pulsefits
     import granchain.analysis as analysis
+    import granchain.analysis.pulsefits as pulsefits
 
     assert name in analysis.__all__ and name in dir(analysis)
     assert getattr(analysis, name) is getattr(pulsefits, name, getattr(analysis, name))

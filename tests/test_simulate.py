@@ -12,11 +12,11 @@ import math
 
 import numpy as np
 import pytest
+from conftest import in_order
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
 import granchain as gc
-from conftest import in_order
 from granchain import bca
 
 # Small radii of decorated chains: the paper's range [0.01, 0.4], N = 2..26 large granules.

@@ -15,8 +15,12 @@ import pytest
 import xarray as xr
 
 import granchain as gc
-from granchain.ensembles.store import StoreRepairWarning, check_same_parameters, current_record
 from granchain._version import RESULTS_VERSION
+from granchain.ensembles.store import (
+    StoreRepairWarning,
+    check_same_parameters,
+    current_record,
+)
 
 DATA = Path(__file__).parent / "data"
 GRID = np.round(np.arange(0.0, 30.05, 0.5), 12)

@@ -13,8 +13,8 @@ import xarray as xr
 from scipy import stats
 
 import granchain as gc
-from granchain.paper import validity
 from granchain.model.distributions import distribution_from_record
+from granchain.paper import validity
 
 SMALL = dict(alphas=(0.01,), betas=(0.2, 0.4, 0.9), n_large=(6,), realizations=60, blocks=5, seed=11, progress=False)
 

@@ -43,14 +43,24 @@ import math
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import in_order
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
 import granchain as gc
-from conftest import in_order
+from granchain.backends.kernels.records import (
+    INFO_FROZEN_POTENTIAL,
+    INFO_STEPS,
+    INFO_WINDOW_START,
+)
 from granchain.ensembles import run as ens
-from granchain.solve.integrators import RELAXED_FACTOR, RELAXED_LAG, WINDOW_LAG, RunControls, integrator_from_record
-from granchain.backends.kernels.records import INFO_FROZEN_POTENTIAL, INFO_STEPS, INFO_WINDOW_START
+from granchain.solve.integrators import (
+    RELAXED_FACTOR,
+    RELAXED_LAG,
+    WINDOW_LAG,
+    RunControls,
+    integrator_from_record,
+)
 from granchain.solve.simulate import default_t_max
 
 N = 26

@@ -72,7 +72,11 @@ class Backend:
         """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time."""
         from ..model.chain import Chain
         from .kernels.aligned import accumulate_aligned
-        from .kernels.batch import accumulate_fixed_point, accumulate_fixed_point_1d, gather_forces
+        from .kernels.batch import (
+            accumulate_fixed_point,
+            accumulate_fixed_point_1d,
+            gather_forces,
+        )
         from .kernels.forces import final_energy, impulse_energy
         from .kernels.records import INFO_STEPS, INFO_T_END
 

@@ -14,8 +14,22 @@ from . import Backend, aligned_outputs, effective_integrator
 from .kernels.batch import integrate_batch, thread_sums
 from .kernels.dispatch import integrate_chain
 from .kernels.forces import power_code
-from .kernels.records import (INFO_SIZE, KIND_DP5, KIND_RKN4, KIND_VERLET, Batch, Method, Model, Outputs, Params, Run,
-                              Rows, State, Sums, Tally)
+from .kernels.records import (
+    INFO_SIZE,
+    KIND_DP5,
+    KIND_RKN4,
+    KIND_VERLET,
+    Batch,
+    Method,
+    Model,
+    Outputs,
+    Params,
+    Rows,
+    Run,
+    State,
+    Sums,
+    Tally,
+)
 
 
 def _rk_params(integ) -> np.ndarray:

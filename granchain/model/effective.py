@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import Chain, sphere_mass, sphere_stiffness
 from .._validate import warn_effective_validity
+from .chain import Chain, sphere_mass, sphere_stiffness
 
 __all__ = ["effective", "effective_parameters"]
 

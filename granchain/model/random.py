@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._validate import count
 from .chain import HERTZ, Chain, decorated
 from .distributions import as_distribution, small_radius_distribution
-from .._validate import count
 
 __all__ = ["realization_rng", "draw_small_radii", "random_decorated"]
 

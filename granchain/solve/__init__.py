@@ -4,7 +4,16 @@ and the integrator to the integrator's backend (:mod:`granchain.backends`) and r
 :class:`~granchain.PulseResult`.
 """
 
-from .integrators import DOP853, DP5, INTEGRATORS, RKN4, Integrator, RunControls, Verlet, get_integrator
+from .integrators import (
+           DOP853,
+           DP5,
+           INTEGRATORS,
+           RKN4,
+           Integrator,
+           RunControls,
+           Verlet,
+           get_integrator,
+)
 from .simulate import PulseResult, simulate
 
 __all__ = ["DP5", "RKN4", "Verlet", "DOP853", "INTEGRATORS", "Integrator", "RunControls", "get_integrator", "PulseResult",

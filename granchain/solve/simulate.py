@@ -7,14 +7,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..backends import integrator_as_run
-from ..model.chain import Chain
-from .integrators import RunControls, get_integrator
-from ..backends.kernels.forces import final_energy, total_momentum
-from ..backends.kernels.records import INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END
 from .._status import Status
 from .._validate import finite_scalar
+from ..backends import integrator_as_run
+from ..backends.kernels.forces import final_energy, total_momentum
+from ..backends.kernels.records import (
+    INFO_EVALUATIONS,
+    INFO_EXIT,
+    INFO_REJECTED,
+    INFO_STEPS,
+    INFO_T_END,
+)
+from ..model.chain import Chain
 from ..units import rescaled_attrs
+from .integrators import RunControls, get_integrator
 
 __all__ = ["Status", "PulseResult", "simulate", "default_t_max"]
 

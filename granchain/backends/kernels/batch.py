@@ -22,7 +22,17 @@ from .aligned import accumulate_aligned
 from .dispatch import integrate_chain
 from .forces import final_energy, impulse_energy
 from .jit import JIT, JIT_PARALLEL
-from .records import INFO_SIZE, INFO_STEPS, INFO_T_END, Model, Outputs, Params, Partials, Run, State
+from .records import (
+    INFO_SIZE,
+    INFO_STEPS,
+    INFO_T_END,
+    Model,
+    Outputs,
+    Params,
+    Partials,
+    Run,
+    State,
+)
 
 
 @njit(**JIT)

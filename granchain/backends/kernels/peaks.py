@@ -11,8 +11,15 @@ from numba import njit
 
 from .forces import contact_force
 from .jit import JIT
-from .records import (INFO_EVALUATIONS, INFO_EXIT, INFO_FROZEN_POTENTIAL, INFO_REJECTED, INFO_STEPS, INFO_T_END,
-                      INFO_WINDOW_START)
+from .records import (
+    INFO_EVALUATIONS,
+    INFO_EXIT,
+    INFO_FROZEN_POTENTIAL,
+    INFO_REJECTED,
+    INFO_STEPS,
+    INFO_T_END,
+    INFO_WINDOW_START,
+)
 
 
 @njit(**JIT)

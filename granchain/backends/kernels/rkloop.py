@@ -14,17 +14,37 @@ import math
 import numpy as np
 from numba import njit
 
-from . import dp5, rkn4
 from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW
-from .dense import (ROOT_ACCELERATION, ROOT_APPROACH, dense_compression, dense_value, falls, first_root,
-                    hermite_max_estimate, weights)
+from . import dp5, rkn4
+from .dense import (
+    ROOT_ACCELERATION,
+    ROOT_APPROACH,
+    dense_compression,
+    dense_value,
+    falls,
+    first_root,
+    hermite_max_estimate,
+    weights,
+)
 from .forces import accelerations, add_potential, contact_force
 from .jit import JIT, JIT_INLINE
 from .memory import borrowed, keep_alive
-from .peaks import final_force_peaks, final_peaks, initial_force_records, initial_records, is_new_peak, write_info
+from .peaks import (
+    final_force_peaks,
+    final_peaks,
+    initial_force_records,
+    initial_records,
+    is_new_peak,
+    write_info,
+)
 from .records import KIND_DP5, KIND_RKN4, Dense, Forces, Model, Outputs, Run, State
 from .stop import end_of_step, stop_time
-from .window import advance_window, initial_window, is_finite_window, open_contact_behind
+from .window import (
+    advance_window,
+    initial_window,
+    is_finite_window,
+    open_contact_behind,
+)
 
 SAFETY = 0.9
 #: Contact-force screen: the root of a compression maximum is searched only if the Hermite

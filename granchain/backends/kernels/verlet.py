@@ -13,14 +13,20 @@ second order.
 
 from __future__ import annotations
 
-
 import numpy as np
 from numba import njit
 
 from ..._status import MAX_STEPS, NONFINITE
 from .forces import accelerations, contact_force
 from .jit import JIT
-from .peaks import final_force_peaks, final_peaks, initial_force_records, initial_records, is_new_peak, write_info
+from .peaks import (
+    final_force_peaks,
+    final_peaks,
+    initial_force_records,
+    initial_records,
+    is_new_peak,
+    write_info,
+)
 from .records import Forces
 from .stop import end_of_step, stop_time
 from .window import advance_window, initial_window, is_finite_window
