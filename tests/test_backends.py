@@ -32,6 +32,7 @@ import json
 import os
 import pkgutil
 import re
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -516,3 +517,61 @@ def test_a_new_model_field_reaches_the_step_loop_untouched(model_field_run, inte
         f"{integ_name}: the step loop saw {run['seen']} instead of the new field's value {model_field_run['probe']}")
     for key in set(plain) - {"error", "seen"}:
         assert run[key] == plain[key], f"{integ_name}: {key} changed with the new field"
+
+
+COMPILED_FIELD_SCRIPT = """
+import json, sys
+sys.path.insert(0, {root!r})
+import numpy as np
+import granchain as gc
+assert gc.__file__.startswith({root!r}), gc.__file__
+chain = gc.random_decorated(6, gc.Uniform(0.01, 0.4), seed=3)
+r = gc.simulate(chain, gc.DP5(), t_grid=np.linspace(0.0, 20.0, 41))
+ds = gc.run_ensemble(4, realizations=3, chunk_size=3, seed=2, chains="decorated", progress=False)
+print(json.dumps(dict(peak_velocity=r.peak_velocity.tolist(), peak_time=r.peak_time.tolist(),
+                      ensemble=ds["peak_time"].values.tolist())))
+"""
+
+
+@pytest.mark.slow
+def test_a_new_params_field_compiles_and_reaches_the_forces(tmp_path):
+    """The compiled counterpart of the test above, on a copy of the package: ``records.Params`` gets a
+    field ``stiffening``, ``numba_backend.model_params`` fills it with 2, and the two Hertz force
+    expressions of ``forces`` multiply by it; no other line changes. The kernels must compile
+    (simulate and the parallel batch kernel) and the field must reach the forces: every contact
+    twice as stiff. Physics check of that: with m x'' = c delta^(n-1) and v_1(0) = 1, x = a X and
+    t = a T (velocities unchanged) leave the equation invariant when a^n = m / c, so doubling every
+    c scales every time by 2^(-1/n) and leaves every velocity unchanged (Hertz: times x 0.758). Compared
+    with the unchanged package's runs, to the integrators' accuracy."""
+    root = tmp_path / "pkg"
+    shutil.copytree(Path(gc.__file__).parent, root / "granchain", ignore=shutil.ignore_patterns("__pycache__"))
+    kernels = root / "granchain" / "backends"
+    edits = {
+        kernels / "kernels" / "records.py": [('Params = namedtuple("Params", ["n", "power", "wall"])',
+                                              'Params = namedtuple("Params", ["n", "power", "wall", "stiffening"])')],
+        kernels / "numba_backend.py": [("return Params(float(chain.n), power_code(chain.n), chain.boundary.wall)",
+                                        "return Params(float(chain.n), power_code(chain.n), chain.boundary.wall, 2.0)")],
+        kernels / "kernels" / "forces.py": [("return c * d * math.sqrt(d)", "return p.stiffening * c * d * math.sqrt(d)"),
+                                            ("F[j + 1] = c[j] * d * math.sqrt(d)",
+                                             "F[j + 1] = p.stiffening * c[j] * d * math.sqrt(d)")],
+    }
+    for path, pairs in edits.items():
+        text = path.read_text()
+        for old, new in pairs:
+            assert text.count(old) == 1, f"the test edits {old!r} in {path.name}: update the test"
+            text = text.replace(old, new)
+        path.write_text(text)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+
+    def run(script_root):
+        proc = subprocess.run([sys.executable, "-c", COMPILED_FIELD_SCRIPT.format(root=str(script_root))],
+                              capture_output=True, text=True, cwd=tmp_path, env=env, timeout=900)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    stiff = run(root)
+    plain = run(Path(gc.__file__).parents[1])
+    scale = 2.0 ** (-1.0 / 2.5)
+    np.testing.assert_allclose(stiff["peak_velocity"], plain["peak_velocity"], rtol=2e-6)
+    np.testing.assert_allclose(stiff["peak_time"], scale * np.asarray(plain["peak_time"]), rtol=0, atol=2e-5)
+    np.testing.assert_allclose(stiff["ensemble"], scale * np.asarray(plain["ensemble"]), rtol=0, atol=2e-4)
