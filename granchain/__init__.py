@@ -12,7 +12,7 @@ from .model.random import draw_small_radii, random_decorated, realization_rng
 from ._status import Status
 from ._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
 from .solve.integrators import DOP853, DP5, INTEGRATORS, RKN4, Integrator, RunControls, Verlet, VerletStabilityWarning, get_integrator
-from .solve.simulate import PulseResult, default_t_max, simulate
+from .solve.simulation import PulseResult, default_t_max, simulate
 from .families import (
     FAMILIES,
     BinaryRandom,

@@ -159,7 +159,7 @@ def _simulate_batch(masses: np.ndarray, stiffness: np.ndarray, n: float, observe
     also the batch's aligned pulse <v(t_peak + tau)> per observed granule (on a grid of step
     ``dt``, cubic interpolation: ``granchain.backends.kernels.aligned``)."""
     from .solve.integrators import DP5, RunControls
-    from .solve.simulate import time_limit
+    from .solve.simulation import time_limit
 
     R, M = masses.shape
     obs = np.arange(M, dtype=np.int64) if observed is None else np.asarray(observed, dtype=np.int64)
@@ -320,7 +320,7 @@ def transfer_table(distribution, start: str, end: str, width: int, step: int, se
 # --------------------------------------------------------------------------- monodisperse references
 def _monodisperse(size: int, n: float, t_grid=None):
     from .model.chain import monodisperse
-    from .solve.simulate import simulate
+    from .solve.simulation import simulate
 
     return simulate(monodisperse(size, n=n), t_grid=t_grid)
 

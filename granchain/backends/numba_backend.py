@@ -68,6 +68,9 @@ def model_record(chain) -> Model:
 
 
 def run_record(chain, t_grid, t_max, stop_at_exit, controls) -> Run:
+    """The kernel's ``Run``: what to record (``chain``'s observed granules, velocities on ``t_grid``)
+    and when to stop (``t_max``, or the pulse's exit with ``stop_at_exit``; ``controls``:
+    :class:`granchain.RunControls`)."""
     return Run(chain.observed, t_grid, float(t_max), bool(stop_at_exit), controls.exit_margin, controls.max_steps,
                controls.peak_rtol)
 

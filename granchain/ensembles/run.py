@@ -22,7 +22,7 @@ import numpy as np
 
 from ..model.chain import HERTZ
 from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
-from ..solve.simulate import time_limit
+from ..solve.simulation import time_limit
 from .store import MemorySink, ZarrSink
 from .._validate import count
 from .._version import RESULTS_VERSION

@@ -10,8 +10,8 @@
 - :mod:`~granchain.model.distributions`: small-radius distributions;
 - :mod:`~granchain.model.random`: random decorated chains drawn from (seed, realisation).
 
-Everything here is plain NumPy: solving (:mod:`granchain.solve`) and the compiled code
-(:mod:`granchain.backends`) read these values, never the other way round.
+Everything here is NumPy and SciPy (no compiled code): solving (:mod:`granchain.solve`) and the
+compiled code (:mod:`granchain.backends`) read these values, never the other way round.
 """
 
 from .contacts import FreeEnd, Impulse, PowerLaw, RigidWall

@@ -1,5 +1,5 @@
 """Solving one chain: the integrators (values with capabilities, :mod:`~granchain.solve.integrators`)
-and :func:`~granchain.simulate` (:mod:`~granchain.solve.simulate`), which validates, hands the chain
+and :func:`~granchain.simulate` (:mod:`~granchain.solve.simulation`), which validates, hands the chain
 and the integrator to the integrator's backend (:mod:`granchain.backends`) and returns a
 :class:`~granchain.PulseResult`.
 """
@@ -14,7 +14,7 @@ from .integrators import (
            Verlet,
            get_integrator,
 )
-from .simulate import PulseResult, simulate
+from .simulation import PulseResult, simulate
 
 __all__ = ["DP5", "RKN4", "Verlet", "DOP853", "INTEGRATORS", "Integrator", "RunControls", "get_integrator", "PulseResult",
            "simulate"]

@@ -4,8 +4,8 @@ A kernel entry point takes a handful of these (Numba compiles a named tuple into
 fields it reads directly, at no cost over separate arguments): a new model parameter is one more
 field here and in the Python code that fills it (``granchain.backends.numba_backend``), not one more
 argument in every signature between them. ``tests/test_backends.py`` counts the positional
-arguments of every compiled entry point and checks that a field added to :data:`Model` reaches the
-kernel with no other change.
+arguments of every compiled entry point and checks that a field added to :data:`Params` reaches the
+kernels (interpreted and compiled) with no other change.
 
 Arrays are float64 and C-contiguous unless said otherwise; indices 0-based.
 """
@@ -31,7 +31,7 @@ Model = namedtuple("Model", ["masses", "stiffness", "params"])
 #: ``initial_velocity`` (R,) (the impulse on granule 1 of each row), and the :data:`Params` the rows share.
 Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "params"])
 
-#: The integration method: ``kind`` (``dispatch.KIND_*``) and its settings ``params`` (float64,
+#: The integration method: ``kind`` (``KIND_*`` below) and its settings ``params`` (float64,
 #: laid out by the kind: see ``dispatch.integrate_chain``).
 Method = namedtuple("Method", ["kind", "params"])
 
