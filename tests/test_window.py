@@ -61,7 +61,7 @@ from granchain.solve.integrators import (
     RunControls,
     integrator_from_record,
 )
-from granchain.solve.simulate import default_t_max
+from granchain.solve.simulation import default_t_max
 
 N = 26
 KINDS = ("decorated", "effective")
