@@ -23,6 +23,8 @@ import dataclasses
 
 import numpy as np
 
+from ..model.contacts import PowerLaw
+
 __all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run"]
 
 
@@ -55,12 +57,18 @@ class Backend:
     override it with a parallel kernel)."""
 
     name: str = ""
+    #: The contact laws this backend has code for (exact types: a subclass may change the force).
+    contact_laws: tuple = (PowerLaw,)
 
     def check(self, integrator, chain) -> None:
-        """Refuse an integrator whose requirements the chain's model does not meet (with what to change)."""
+        """Refuse an integrator whose requirements the chain's model does not meet, and a contact law
+        this backend has no code for (rather than run it as another law), saying what to change."""
         if integrator.needs_conservative_forces and not chain.contact.conservative:
             raise ValueError(f"{integrator.name} integrates x'' = f(x) and needs forces that depend on positions only; "
                              f"the contact law {chain.contact!r} depends on velocities: use DP5 or DOP853")
+        if type(chain.contact) not in self.contact_laws:
+            raise ValueError(f"the {self.name} backend has no code for the contact law {chain.contact!r}; it runs "
+                             f"{', '.join(law.__name__ for law in self.contact_laws)}")
 
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state); returns
