@@ -25,6 +25,7 @@ from .families import (
     family_from_record,
 )
 from .ensembles.run import ENSEMBLE_ATOL, ENSEMBLE_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, EnsembleSpec, default_time_grid, ensemble_integrator, run_ensemble
+from .ensembles.store import open_store
 from .units import Material, Scale, scale, to_physical  # physical units; the rest in granchain.units
 
 __all__ = [
@@ -72,6 +73,7 @@ __all__ = [
     "from_radii",
     "get_integrator",
     "monodisperse",
+    "open_store",
     "random_decorated",
     "realization_rng",
     "regular_decorated",

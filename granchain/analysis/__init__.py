@@ -6,7 +6,8 @@
 * :func:`histogram` - arrival-time densities with Poisson error bars, paper Fig. 4;
 * :func:`ks_normal` - the KS distance d of the standardised sample to N(0, 1), paper
   Eq. (AD), with a Monte Carlo (Lilliefors) p-value;
-* observables of an ensemble Dataset (the ``run_ensemble`` store schema): the two
+* observables of an ensemble Dataset (the ``run_ensemble`` store schema) or of the store at a path
+  (read with :func:`granchain.open_store`): the two
   different amplitudes :func:`mean_peak_amplitude` (<max_t v_k>) and
   :func:`averaged_pulse_peak` (max_t <v_k(t)>, the paper's Fig. 2), plus
   :func:`mean_arrival_time`, :func:`arrival_times`, :func:`out_of_order_peaks`;
@@ -452,7 +453,23 @@ def ks_normal(sample, *, n_mc_samples=500, rng=0, batch=100) -> KSResult:
 _NEEDED = ("status", "peak_velocity", "peak_time", "mean_velocity", "mean_velocity_stderr")
 
 
+def _dataset(ds):
+    """An ensemble Dataset as given, or the store at a path (str or os.PathLike) read with
+    :func:`granchain.open_store` (records and metadata of earlier versions in today's form)."""
+    import os
+
+    if isinstance(ds, (str, os.PathLike)):
+        from ..ensembles.store import open_store
+
+        try:
+            return open_store(ds)
+        except ValueError as exc:
+            raise ValueError(f"ds = {os.fspath(ds)!r} is neither an ensemble Dataset nor a store it can read: {exc}") from None
+    return ds
+
+
 def _chain(ds, chain: str, need: tuple[str, ...]):
+    ds = _dataset(ds)
     missing = [v for v in need if v not in ds.variables]
     if missing:
         raise ValueError(f"the Dataset lacks {missing}; expected the run_ensemble schema ({', '.join(_NEEDED)})")
@@ -580,9 +597,10 @@ def pulse_peak(time, mean, stderr=None):
 
 def averaged_pulse_peak(ds, chain="decorated") -> PulsePeak:
     """max_t <v_k(t)> and argmax_t, per granule, with quadratic refinement (paper Fig. 2)."""
+    ds = _dataset(ds)
     if not hasattr(ds, "data_vars") or "mean_velocity" not in ds:
         raise ValueError(f"ds must be an ensemble Dataset with mean_velocity (from run_ensemble or "
-                         f"xarray.open_dataset(store, engine='zarr')), got {type(ds).__name__}")
+                         f"granchain.open_store(path)) or the path of a store, got {type(ds).__name__}")
     sub = _chain(ds, chain, ("mean_velocity", "mean_velocity_stderr"))
     v = sub["mean_velocity"].transpose("granule", "time").values.astype(float)
     e = sub["mean_velocity_stderr"].transpose("granule", "time").values.astype(float)

@@ -107,11 +107,12 @@ class ChunkSums:
 
     @classmethod
     def from_store(cls, path) -> "ChunkSums":
-        """Read the ``progress`` group of a ``run_ensemble`` Zarr store (finished chunks only)."""
-        import xarray as xr
+        """Read the ``progress`` group of a ``run_ensemble`` Zarr store (finished chunks only;
+        :func:`granchain.open_store`)."""
+        from ..ensembles.store import open_store
 
-        root = xr.open_zarr(path, consolidated=False)
-        prog = xr.open_zarr(path, group="progress", consolidated=False).load()
+        root = open_store(path)
+        prog = open_store(path, group="progress", load=True)
         done = prog["done"].values.astype(bool)
         return cls(prog["sum_v"].values[done], prog["sum_v2"].values[done], prog["n_valid"].values[done],
                    int(root.attrs["fixed_point_bits"]), tuple(str(c) for c in root["chain"].values),

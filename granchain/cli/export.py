@@ -27,15 +27,18 @@ def add_parser(subparsers) -> None:
 
 
 def cf_dataset(ds):
-    """The store's Dataset with CF-1.8 metadata: every rescaled quantity is dimensionless (units "1", the
-    scale in ``comment``), ``status`` carries ``flag_values``/``flag_meanings`` (-1 = not computed)."""
+    """The store's Dataset (:func:`granchain.open_store`: its metadata already today's) with CF-1.8 metadata:
+    every rescaled quantity is dimensionless (units "1", any other scale in ``comment``), text variables
+    (``chain``) carry no units, flag variables (``status``) carry the schema's ``flag_values``/``flag_meanings``
+    (-1 = not computed) instead of units, and no integer is wider than 32 bits (CF-1.8, Sec. 2.2)."""
     import numba
     import numpy as np
     import scipy
 
     from .. import __version__
-    from .._status import NOT_COMPUTED, Status
+    from ..ensembles.store import AVERAGED, FORCES, RESULTS, WALL
 
+    flags = {v.name: v.attrs for v in RESULTS + FORCES + WALL + AVERAGED if "flag_values" in v.attrs}
     out = ds.copy()
     for name, var in out.variables.items():
         attrs = dict(var.attrs)
@@ -43,9 +46,9 @@ def cf_dataset(ds):
         if units is not None and units != "1":
             attrs["comment"] = f"rescaled units: {units}"
             attrs["units"] = "1"
-        if name in ("chain",):
+        if var.dtype.kind not in "fiu" or name in flags:
             attrs.pop("units", None)
-        elif "units" not in attrs and var.dtype.kind in "fiu" and name not in ("status",):
+        elif "units" not in attrs:
             attrs["units"] = "1"
         var.attrs = attrs
         var.encoding = {"_FillValue": None} if name in ds.coords or var.dtype.kind in "iu" else {}
@@ -57,11 +60,10 @@ def cf_dataset(ds):
             out[name] = var.astype(np.int32)
             out[name].attrs = var.attrs
             out[name].encoding = {"_FillValue": None}
-    if "status" in out:
-        codes = [NOT_COMPUTED] + [int(s) for s in Status]
-        out["status"].attrs.update(flag_values=np.array(codes, dtype=out["status"].dtype),
-                                   flag_meanings=" ".join(["NOT_COMPUTED"] + [s.name for s in Status]))
-        out["status"].attrs.pop("units", None)
+    for name, attrs in flags.items():
+        if name in out:
+            out[name].attrs.update(flag_values=np.array(attrs["flag_values"], dtype=out[name].dtype),
+                                   flag_meanings=attrs["flag_meanings"])
     now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     attrs = dict(out.attrs)
     attrs["Conventions"] = "CF-1.8"
@@ -78,17 +80,16 @@ def export(store, file, force: bool = False) -> str:
     """Write ``store`` as a CF-1.8 netCDF file (returns the path)."""
     import warnings
 
-    import xarray as xr
-
-    from ..ensembles.store import stored_parameters
+    from ..ensembles.store import open_store
 
     try:
         import netCDF4  # noqa: F401
     except ImportError:
         raise ValueError("granchain export needs the netCDF4 package: pip install 'granchain[netcdf]' "
                          "(or pip install netCDF4)") from None
-    if not os.path.isdir(store) or stored_parameters(store) is None:
-        raise ValueError(f"{store} is not a granchain ensemble store: give the path of a store written by granchain ensemble")
+    if not os.path.isdir(store):
+        raise ValueError(f"{store} is not a granchain ensemble store (a Zarr directory): give the path of a store written by "
+                         "granchain ensemble")
     file = os.fspath(file)
     if not file.strip():
         raise ValueError("FILE must be a path such as N26.nc, got an empty string")
@@ -97,17 +98,11 @@ def export(store, file, force: bool = False) -> str:
     parent = os.path.dirname(os.path.abspath(file))
     if not os.path.isdir(parent) or not os.access(parent, os.W_OK):
         raise ValueError(f"cannot write {file}: its folder {parent} is missing or not writable")
-    try:
-        with xr.open_zarr(store, consolidated=False) as ds:
-            ds = ds.load()
-    except Exception as exc:  # noqa: BLE001
-        raise ValueError(f"{store} could not be read ({type(exc).__name__}: {exc}); run `granchain info {store}` to see "
-                         "what is damaged, and the ensemble command again to repair it") from None
+    ds = open_store(store, load=True)  # says what to do for a path that is no store or a damaged one
     done = None
     try:
-        with xr.open_zarr(store, group="progress", consolidated=False) as p:
-            done = p["done"].values
-    except Exception:  # noqa: BLE001
+        done = open_store(store, group="progress", load=True)["done"].values
+    except (ValueError, KeyError):
         pass
     if done is not None and not done.all():
         warnings.warn(f"{store} is incomplete ({int(done.sum())}/{done.size} chunks done): the file holds status = -1 "

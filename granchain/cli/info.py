@@ -41,52 +41,46 @@ def _human(n: int) -> str:
 def summary(path: str) -> dict:
     """The facts ``granchain info`` prints (a dict, also its ``--json`` output)."""
     import numpy as np
-    import zarr
 
     from ..ensembles.lock import StoreLock
-    from ..ensembles.store import check_chunk, stored_parameters
+    from ..ensembles.store import current_record, open_store, stored_parameters, verify_chunks
 
     if not os.path.isdir(path):
         raise ValueError(f"{path} is not a directory: give the path of a Zarr store written by granchain ensemble")
-    record = stored_parameters(path)
-    if record is None:
-        raise ValueError(f"{path} is not a granchain ensemble store (no parameter record in .zattrs or progress/.zattrs)")
-    params = json.loads(record)
-    group = zarr.open_group(path, mode="r", zarr_format=2, use_consolidated=False)
+    try:
+        ds, unreadable = open_store(path), None  # the records in today's form (a store of an earlier version too)
+    except ValueError as exc:
+        if stored_parameters(path) is None:
+            raise  # not a store: open_store says what to give instead
+        ds, unreadable = None, str(exc)  # damaged: what can be read is still reported, checksums included
+    stored = stored_parameters(path)
+    params = json.loads(ds.attrs["granchain_parameters"]) if ds is not None else current_record(json.loads(stored))
     R, cs = int(params["realizations"]), int(params["chunk_size"])
     n_chunks = -(-R // cs)
+    done, damaged = verify_chunks(path, R, cs)
+    checksums = damaged is not None
     try:
-        done = np.asarray(group["progress/done"][...])
-    except Exception:  # noqa: BLE001
-        done = np.zeros(n_chunks, dtype=np.int8)
-    names = [str(x) for x in group["progress/checked"][...]]
-    damaged = {}
-    for j in np.flatnonzero(done == 1):
-        reason = check_chunk(path, group, int(j), names, slice(int(j) * cs, min((int(j) + 1) * cs, R)))
-        if reason:
-            damaged[int(j)] = reason
-    try:
-        status = np.asarray(group["status"][...])
-        chains = [str(c) for c in group["chain"][...]]
+        status = np.asarray(ds["status"].values)
+        chains = [str(c) for c in ds["chain"].values]
         codes, counts = np.unique(status, return_counts=True)
         failures = {chain: int(((status[i] != 0) & (status[i] != -1)).sum()) for i, chain in enumerate(chains)}
         status_counts = {int(c): int(n) for c, n in zip(codes, counts)}
-    except Exception:  # noqa: BLE001
+    except Exception:  # noqa: BLE001 -- unreadable status chunks (reported as damaged chunks) or metadata
         failures, status_counts = None, None
     holder = StoreLock(path).holder()
     writing = None
     if isinstance(holder, dict) and not holder.get("released"):
         writing = holder
     done_r = sum(min((j + 1) * cs, R) - j * cs for j in np.flatnonzero(done == 1))
+    written_by = (ds.attrs.get("granchain_version") if ds is not None else None) or json.loads(stored).get("granchain_version")
     return {"store": path, "family": params["family"], "integrator": params["integrator"],
             "chain_integrators": params.get("chain_integrators"), "realizations": R,
             "seed": params["seed"], "chains": params["chains"], "chunk_size": cs, "chunks_done": int((done == 1).sum()),
             "chunks": n_chunks, "realizations_done": int(done_r), "complete": bool((done == 1).all()),
-            "damaged_chunks": damaged, "failed_integrations": failures, "status_counts": status_counts,
-            "size_bytes": _size(path), "lock": writing,
+            "damaged_chunks": damaged or {}, "checksums": checksums, "unreadable": unreadable, "failed_integrations": failures,
+            "status_counts": status_counts, "size_bytes": _size(path), "lock": writing,
             # the writer's version is provenance (root attributes); records name it only before results_version
-            "granchain_version": group.attrs.get("granchain_version", params.get("granchain_version")),
-            "results_version": params.get("results_version")}
+            "granchain_version": written_by, "results_version": params.get("results_version")}
 
 
 def _integrator_lines(integ: dict, per_chain: dict | None) -> list:
@@ -125,12 +119,17 @@ def run(args) -> int:
         h = info["lock"]
         lines.append(f"writer       PID {h.get('pid')} on {h.get('host')} since {h.get('since')} (if it has ended, "
                      "the next run takes the lock over)")
+    if info["unreadable"]:
+        lines.append(f"damaged      {info['unreadable']}")
     for j, reason in info["damaged_chunks"].items():
         lines.append(f"damaged      chunk {j} {reason}")
-    if info["damaged_chunks"] or not info["complete"]:
+    if info["damaged_chunks"] or info["unreadable"] or not info["complete"]:
         lines.append("to continue  run the same `granchain ensemble ... --out STORE` command again (or run_ensemble with the "
                      "same arguments and out=STORE): damaged and missing chunks are recomputed; a larger --realizations "
                      "extends the store")
+    elif not info["checksums"]:
+        lines.append(f"unverified   written by granchain {info['granchain_version']}, before chunks were checksummed; "
+                     "export with: granchain export STORE FILE.nc")
     else:
         lines.append("intact       every chunk matches its checksums; export with: granchain export STORE FILE.nc")
     print("\n".join(lines))

@@ -41,14 +41,13 @@ def add_parser(subparsers) -> None:
 
 
 def _measured(store, N: int, dist_label: str) -> dict:
-    import xarray as xr
-
     from .. import analysis
+    from ..ensembles.store import open_store
 
     path = Path(store)
     if not path.exists():
         raise ValueError(f"--compare: no store at {store}; run e.g. `granchain ensemble --large {N} --out {store}` first")
-    ds = xr.open_zarr(path, consolidated=False)
+    ds = open_store(path)
     if int(ds.sizes["granule"]) != N:
         raise ValueError(f"--compare: the store has N = {ds.sizes['granule']} large granules, the prediction N = {N}; "
                          "pass the same --large")

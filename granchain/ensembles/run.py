@@ -23,7 +23,7 @@ import numpy as np
 from ..model.chain import HERTZ
 from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
 from ..solve.simulation import time_limit
-from .store import MemorySink, ZarrSink
+from .store import WALL, MemorySink, Variable, ZarrSink
 from .._validate import count
 from .._version import RESULTS_VERSION
 from ..families import ChainFamily, RandomDecorated
@@ -216,30 +216,26 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_pro
             on_progress(parts[-1]["realizations"])
             step = max(step, int((stop - start) * PROGRESS_SECONDS / max(elapsed, 1e-3)))
             start = stop
-        return _merge(parts, spec.family)
+        return _merge(parts, spec)
     finally:
         numba.set_num_threads(previous)
 
 
-#: Arrays of a chunk's result with a realisation axis that are not store variables themselves
-#: (the wall's (peak force, time) buffer is split into peak_wall_force and peak_wall_force_time).
-_INTERNAL_REALISATION_AXIS = {"peak_wall": 1, "peak_wall_force": 1, "peak_wall_force_time": 1}
-
-
-def _merge(parts: list, family) -> dict:
+def _merge(parts: list, spec: EnsembleSpec) -> dict:
     """One chunk's result from the results of consecutive batches of its realisations: per-realisation
-    arrays are joined along their ``realization`` axis (read from the store schema), the fixed-point
-    sums added. An array the schema does not name is an error, never a silent wrong join."""
-    from .store import per_realisation_variables
+    arrays are joined along their ``realization`` axis, the fixed-point sums added (both read from the
+    store schema). An array the schema does not name is an error, never a silent wrong join."""
+    from .store import per_realisation_variables, progress_sums
 
     if len(parts) == 1:
         return parts[0]
-    axis = {v.name: v.dims.index("realization") for v in per_realisation_variables(family)} | _INTERNAL_REALISATION_AXIS
+    axis = {v.name: v.dims.index("realization") for v in per_realisation_variables(spec.family)}
+    sums = progress_sums(spec)
     out = {"chunk": parts[0]["chunk"], "realizations": sum(p["realizations"] for p in parts)}
     for key in parts[0]:
         if key in out:
             continue
-        if key.startswith("sum_") or key == "n_valid":  # exact integer sums
+        if key in sums:  # exact integer sums
             out[key] = sum(p[key] for p in parts)
         elif key in axis:
             out[key] = np.concatenate([p[key] for p in parts], axis=axis[key])
@@ -248,38 +244,73 @@ def _merge(parts: list, family) -> dict:
     return out
 
 
+# The compute buffers come from the store schema (granchain.ensembles.store): a chunk's result holds every
+# result and progress sum of the schema under its name, allocated with the Variable's dtype and fill value
+# and its dims' sizes, so a variable added to the schema gets its buffer, reaches the integrator in
+# ``out`` (``Integrator.integrate_batch``) and is written to the store. Where the kernels' conventions
+# differ from the store's (arrays packed together, an array no store holds, sums grid axis first), they
+# are converted here, in one place:
+
+#: Kernel arrays that hold several schema variables side by side on a last axis, in the schema's order:
+#: the wall's peak force and its time are one (R, 2) array in the kernels. Chains without a wall get it
+#: too (the kernels leave it untouched); the store then holds nothing from it.
+PACKED = {"peak_wall": WALL}
+
+#: What the kernels compute that no store holds: the wall force summed on the time grid.
+UNSTORED = (Variable("sum_wall", ("chunk", "chain", "time"), "int64", 0, "1",
+                     "sum over the chunk's successful realisations of round(F_wall * 2^bits)"),)
+
+#: Grid dimensions: the kernels add a realisation's samples (grid, granule) row by row, grid axis first.
+_GRID_DIMS = ("time", "lag")
+
+
+def _kernel_dims(v: Variable) -> tuple:
+    """The dims in which the kernels fill one chunk's share of a progress sum: chain first (one chain kind
+    per call), the grid axis before the granule, and a count per chain (n_valid) as a one-element array."""
+    rest = [d for d in v.dims if d not in ("chunk", "chain")]
+    rest = [d for d in rest if d in _GRID_DIMS] + [d for d in rest if d not in _GRID_DIMS]
+    return ("chain", *(rest or ["one"]))
+
+
+def _store_layout(buffer: np.ndarray, v: Variable) -> np.ndarray:
+    """A progress sum from the kernels' layout (:func:`_kernel_dims`) to the schema's dims without ``chunk``."""
+    have = [d for d in _kernel_dims(v) if d != "one"]
+    buffer = buffer.reshape(buffer.shape[:len(have)])  # drops the one-element axis of a count
+    return np.ascontiguousarray(buffer.transpose([have.index(d) for d in v.dims if d != "chunk"]))
+
+
+def chunk_buffers(spec: EnsembleSpec, realizations: int) -> dict:
+    """Arrays at their not-computed values for ``realizations`` realisations of every chain, by kernel name: each
+    result of :func:`~granchain.ensembles.store.result_variables` (dims ``chain``, ``realization``, ...) and each
+    progress sum (:func:`~granchain.ensembles.store.progress_sum_variables`, in :func:`_kernel_dims`), plus the
+    kernel-only arrays :data:`PACKED` (the members share dims, dtype and fill) and :data:`UNSTORED`. The
+    kernels add into the sums, which start at their fill value, 0."""
+    from .store import progress_sum_variables, result_variables, sizes
+
+    dims = {**sizes(spec), "realization": realizations, "one": 1}
+
+    def full(v: Variable, names, extra=()):
+        return np.full(tuple(dims[d] for d in names) + extra, v.fill, dtype=v.dtype)
+
+    packed = {m.name for members in PACKED.values() for m in members}
+    out = {v.name: full(v, v.dims) for v in result_variables(spec.family) if v.name not in packed}
+    out.update({name: full(members[0], members[0].dims, (len(members),)) for name, members in PACKED.items()})
+    out.update({v.name: full(v, _kernel_dims(v)) for v in progress_sum_variables(spec) + UNSTORED})
+    return out
+
+
 def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
+    """Chunk j (or its realisations ``sl``): a dict holding every :func:`~granchain.ensembles.store.chunk_variables`
+    entry under its name (per-realisation arrays over the realisations computed, the progress sums without
+    their ``chunk`` dim), plus ``chunk`` and ``realizations``."""
+    from .store import progress_sum_variables, result_variables
+
     sl = spec.chunk_slice(j) if sl is None else sl
     idx = np.arange(sl.start, sl.stop)
     family = spec.family
     params = family.draw_batch(spec.seed, idx)
-    R, K, T, nc = idx.size, family.n_observed, spec.t_grid.size, len(spec.chains)
-    C = family.n_contacts
-    out = {
-        "chunk": j,
-        "realizations": R,
-        **params,
-        "peak_velocity": np.zeros((nc, R, K)),
-        "peak_time": np.zeros((nc, R, K)),
-        "peak_force": np.zeros((nc, R, C)),
-        "peak_force_time": np.zeros((nc, R, C)),
-        "peak_wall": np.full((nc, R, 2), np.nan),  # the wall's peak force and its time (families with a wall)
-        "status": np.zeros((nc, R), dtype=np.int64),
-        "energy_error": np.zeros((nc, R)),
-        "n_steps": np.zeros((nc, R), dtype=np.int64),
-        "t_end": np.zeros((nc, R)),
-        "sum_v": np.zeros((nc, T, K), dtype=np.int64),  # time-major in the kernels
-        "sum_v2": np.zeros((nc, T, K), dtype=np.int64),
-        "sum_wall": np.zeros((nc, T), dtype=np.int64),  # fixed-point sums of the wall force on the grid
-        "n_valid": np.zeros((nc, 1), dtype=np.int64),
-    }
+    buffers = chunk_buffers(spec, idx.size)
     scale = float(2.0**spec.fixed_point_bits)
-    per_chain = ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "peak_wall", "status", "energy_error", "n_steps",
-                 "t_end", "sum_v", "sum_v2", "sum_wall", "n_valid")
-    if spec.lags is not None:  # the aligned pulse, lag-major in the kernels
-        out["sum_a"] = np.zeros((nc, spec.lags.size, K), dtype=np.int64)
-        out["sum_a2"] = np.zeros((nc, spec.lags.size, K), dtype=np.int64)
-        per_chain += ("sum_a", "sum_a2")
     for ci, name in enumerate(spec.chains):
         batch = family.build(params, name)
         masses = np.ascontiguousarray(batch.masses, dtype=float)
@@ -289,13 +320,15 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
             masses, np.ascontiguousarray(batch.stiffness, dtype=float), batch.n, v0,
             np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),
             t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale,
-            out={**{k: out[k][ci] for k in per_chain}, "lags": spec.lags},
+            out={**{k: a[ci] for k, a in buffers.items()}, "lags": spec.lags},
         )
-    out["peak_wall_force"] = np.ascontiguousarray(out["peak_wall"][..., 0])
-    out["peak_wall_force_time"] = np.ascontiguousarray(out["peak_wall"][..., 1])
-    for name in ("sum_v", "sum_v2", "sum_a", "sum_a2"):
-        if name in out:  # (chain, granule, time | lag)
-            out[name] = np.ascontiguousarray(out[name].transpose(0, 2, 1))
+    out = {"chunk": j, "realizations": idx.size, **params}
+    stored = {v.name for v in result_variables(family)}
+    out.update({name: a for name, a in buffers.items() if name in stored})
+    for name, members in PACKED.items():  # into the schema's variables, where the family's store holds them
+        out.update({v.name: np.ascontiguousarray(buffers[name][..., i]) for i, v in enumerate(members) if v.name in stored})
+    for v in progress_sum_variables(spec):
+        out[v.name] = _store_layout(buffers[v.name], v)
     return out
 
 

@@ -1,8 +1,10 @@
-"""The ensemble store: one schema table, the in-memory and Zarr sinks, and the resume check.
+"""The ensemble store: one schema table, the in-memory and Zarr sinks, the resume check and the reader.
 
 The schema (:data:`RESULTS`, :data:`AVERAGED`, :data:`PROGRESS`, plus the family's own
-random parameters) is the single place that names the variables, their dimensions, fill
-values and metadata: the writer, the resume check, the analysis and the tests read it.
+random parameters) is the single place that names the variables, their dimensions, dtypes, fill
+values and metadata: the ensemble runner allocates its compute buffers from it
+(:func:`chunk_variables`), and the writer, the resume check, the reader :func:`open_store` (which
+every granchain reader uses), the analysis and the tests read it.
 
 Layout of a store (dims ``chain``, ``realization``, ``granule`` = the family's observed
 granules, ``time``, and the family's parameter dims such as ``gap``):
@@ -29,8 +31,8 @@ from .._version import RESULTS_OF_VERSION, __version__
 from ..units import RESCALED, rescaled_attrs
 
 __all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "MemorySink",
-           "ZarrSink", "StoreRepairWarning", "stored_record", "check_same_parameters", "checked_variables", "result_variables",
-           "per_realisation_variables"]
+           "ZarrSink", "StoreRepairWarning", "open_store", "stored_record", "check_same_parameters", "checked_variables",
+           "result_variables", "per_realisation_variables", "progress_sum_variables", "chunk_variables"]
 
 #: Rescaled quantities are stored as dimensionless numbers (units "1": pint, pint-xarray and UDUNITS
 #: read them), with what they count in ``rescaled_quantity``/``units_description`` (granchain.units).
@@ -155,6 +157,20 @@ def progress_sums(spec) -> tuple:
     return PROGRESS_SUMS + (tuple(v.name for v in PROGRESS_ALIGNED) if spec.lags is not None else ())
 
 
+def progress_sum_variables(spec) -> tuple:
+    """The progress variables holding one chunk's results (:func:`progress_sums`), as schema entries."""
+    names = progress_sums(spec)
+    return tuple(v for v in progress_variables(spec) if v.name in names)
+
+
+def chunk_variables(spec) -> tuple:
+    """What one computed chunk holds, each under its schema name: the family's random parameters and the
+    per-realisation results (:func:`per_realisation_variables`, dim ``realization`` = the chunk's
+    realisations) and its progress sums (:func:`progress_sum_variables`, without the ``chunk`` dim).
+    The ensemble runner allocates its compute buffers from the results and the sums."""
+    return per_realisation_variables(spec.family) + progress_sum_variables(spec)
+
+
 def averaged_variables(spec) -> tuple:
     """The averaged variables of a run: :data:`AVERAGED`, plus :data:`ALIGNED` when it has ``lags``."""
     return AVERAGED + (ALIGNED if spec.lags is not None else ())
@@ -173,10 +189,11 @@ def parameter_variables(family) -> tuple:
                  for p in family.parameters())
 
 
-def _sizes(spec) -> dict:
+def sizes(spec) -> dict:
+    """The size of every dimension of a run's store, by name."""
     return {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
-            "checked": len(checked_variables(spec)), "contact": spec.family.n_contacts, **spec.family.dim_sizes(),
-            **({"lag": spec.lags.size} if spec.lags is not None else {})}
+            "checked": len(checked_variables(spec)), "contact": spec.family.n_contacts,
+            **spec.family.dim_sizes(), **({"lag": spec.lags.size} if spec.lags is not None else {})}
 
 
 def checked_variables(spec) -> list[str]:
@@ -258,7 +275,7 @@ def empty_dataset(spec, lazy: bool):
     """The result Dataset with every variable at full size, filled with its not-computed value."""
     import xarray as xr
 
-    sizes = _sizes(spec)
+    dims = sizes(spec)
     if lazy:
         import dask.array as da
 
@@ -267,7 +284,7 @@ def empty_dataset(spec, lazy: bool):
             return da.full(shape, fill, dtype=dtype, chunks=chunks)
 
     def var(v: Variable):
-        shape = tuple(sizes[d] for d in v.dims)
+        shape = tuple(dims[d] for d in v.dims)
         data = full(shape, v.fill, v.dtype, v.dims) if lazy else np.full(shape, v.fill, dtype=v.dtype)
         return (v.dims, data, v.metadata())
 
@@ -295,17 +312,20 @@ def progress_dataset(spec):
     """The ``progress`` group (all zeros) and its encoding (one storage chunk per run chunk)."""
     import xarray as xr
 
-    sizes = _sizes(spec)
+    dims = sizes(spec)
     data, encoding = {}, {}
     for v in progress_variables(spec):
-        shape = tuple(sizes[d] for d in v.dims)
+        shape = tuple(dims[d] for d in v.dims)
         data[v.name] = (v.dims, np.full(shape, v.fill, dtype=v.dtype), v.metadata())
         encoding[v.name] = {"chunks": (1,) + shape[1:]}
-    coords = {"checked": ("checked", np.array(checked_variables(spec), dtype=object).astype(str),
-                          {"long_name": "variable whose chunk values the checksum covers"})}
+    coords = {"checked": ("checked", np.array(checked_variables(spec), dtype=object).astype(str), dict(_CHECKED_ATTRS))}
     ds = xr.Dataset(data, coords=coords, attrs={"granchain_parameters": json.dumps(spec.describe(), sort_keys=True),
-                                 "about": "bookkeeping of granchain.run_ensemble: fixed-point velocity sums per chunk and done flags"})
+                                                "about": _PROGRESS_ABOUT})
     return ds, encoding
+
+
+_CHECKED_ATTRS = {"long_name": "variable whose chunk values the checksum covers"}
+_PROGRESS_ABOUT = "bookkeeping of granchain.run_ensemble: fixed-point velocity sums per chunk and done flags"
 
 
 def chunk_dataset(spec, res: dict):
@@ -346,13 +366,8 @@ class MemorySink:
     def __init__(self, spec):
         self.spec = spec
         self.ds = empty_dataset(spec, lazy=False)
-        shape = (spec.n_chunks, len(spec.chains), spec.family.n_observed, spec.t_grid.size)
-        self.sum_v = np.zeros(shape, dtype=np.int64)
-        self.sum_v2 = np.zeros(shape, dtype=np.int64)
-        self.n_valid = np.zeros((spec.n_chunks, len(spec.chains)), dtype=np.int64)
-        if spec.lags is not None:
-            shape = (spec.n_chunks, len(spec.chains), spec.family.n_observed, spec.lags.size)
-            self.sum_a, self.sum_a2 = np.zeros(shape, dtype=np.int64), np.zeros(shape, dtype=np.int64)
+        dims = sizes(spec)  # the progress group's sums, per chunk, as a store holds them
+        self.sums = {v.name: np.full(tuple(dims[d] for d in v.dims), v.fill, dtype=v.dtype) for v in progress_sum_variables(spec)}
 
     def pending(self) -> list[int]:
         return list(range(self.spec.n_chunks))
@@ -362,13 +377,13 @@ class MemorySink:
         sl = self.spec.chunk_slice(j)
         for name, values in chunk_dataset(self.spec, res).data_vars.items():
             self.ds[name][{"realization": sl}] = values
-        self.sum_v[j], self.sum_v2[j], self.n_valid[j] = res["sum_v"], res["sum_v2"], res["n_valid"][:, 0]
-        if self.spec.lags is not None:
-            self.sum_a[j], self.sum_a2[j] = res["sum_a"], res["sum_a2"]
+        for name, sums in self.sums.items():
+            sums[j] = res[name]
 
     def finalize(self):
-        aligned = (self.sum_a.sum(0), self.sum_a2.sum(0)) if self.spec.lags is not None else ()
-        return finalize(self.ds, self.spec, self.sum_v.sum(0), self.sum_v2.sum(0), self.n_valid.sum(0), *aligned)
+        total = {name: sums.sum(0) for name, sums in self.sums.items()}
+        aligned = (total["sum_a"], total["sum_a2"]) if self.spec.lags is not None else ()
+        return finalize(self.ds, self.spec, total["sum_v"], total["sum_v2"], total["n_valid"], *aligned)
 
 
 class StoreRepairWarning(UserWarning):
@@ -667,10 +682,10 @@ class ZarrSink:
         sl = spec.chunk_slice(j)
         variables, sums = per_realisation_variables(spec.family), progress_sums(spec)
         values = {v.name: np.asarray(res[v.name]).astype(v.dtype, copy=False) for v in variables}
-        # One chunk's sums, with a leading chunk axis (n_valid is (chain, 1) in the result).
+        # One chunk's sums (their schema dims without ``chunk`` in the result), with a leading chunk axis.
         table = {v.name: v for v in progress_variables(spec)}
         for name in sums:
-            values[f"progress/{name}"] = np.asarray(res[name].T if name == "n_valid" else res[name][None], dtype=table[name].dtype)
+            values[f"progress/{name}"] = np.asarray(res[name], dtype=table[name].dtype)[None]
         check = np.array([[digest(values[name], values[name].dtype) for name in checked_variables(spec)]], dtype=np.int64)
         for v in variables:
             self._array(v.name)[_region(v.dims, "realization", sl)] = values[v.name]
@@ -734,6 +749,31 @@ def check_chunk(path, group, j: int, names, sl: slice) -> str | None:
     return None
 
 
+def verify_chunks(path, realizations: int, chunk_size: int) -> tuple:
+    """(done flags, {chunk: why it does not match its checksums}) of the store at ``path``, read without
+    changing it (``granchain info``); the checked variables are the store's own list (progress/checked).
+    None instead of the dict for a store that holds no checksums (written by granchain 0.1.0)."""
+    import zarr
+
+    group = zarr.open_group(path, mode="r", zarr_format=2, use_consolidated=False)
+    n_chunks = -(-realizations // chunk_size)
+    try:
+        done = np.asarray(group["progress/done"][...])
+    except Exception:  # noqa: BLE001 -- unreadable flags: no chunk counts as done
+        done = np.zeros(n_chunks, dtype=np.int8)
+    try:
+        names = [str(x) for x in group["progress/checked"][...]]
+    except KeyError:  # granchain 0.1.0 stored no checksums: nothing to verify
+        return done, None
+    damaged = {}
+    for j in np.flatnonzero(done == 1):
+        sl = slice(int(j) * chunk_size, min((int(j) + 1) * chunk_size, realizations))
+        reason = check_chunk(path, group, int(j), names, sl)
+        if reason:
+            damaged[int(j)] = reason
+    return done, damaged
+
+
 def _buf(raw: bytes):
     from zarr.core.buffer import default_buffer_prototype
 
@@ -787,13 +827,34 @@ def _current_family_record(record: dict) -> dict:
         return record
 
 
+def _record_of_010(record: dict) -> dict:
+    """A granchain 0.1.0 record with its family and integrator as records: 0.1.0 stored the paper's family
+    (RandomDecorated) and its one integrator, the exact DP5, as flat fields (n_large, distribution, n,
+    momentum_conserving; integrator "dp5", rtol, atol). Today's ``DP5(rtol, atol)`` reproduces its
+    realisations bitwise (tests/test_families.py)."""
+    from ..families import RandomDecorated
+    from ..model.chain import HERTZ
+    from ..solve.integrators import DP5
+
+    record = dict(record)
+    record["family"] = {"family": RandomDecorated.kind, "n_large": record.pop("n_large"),
+                        "distribution": record.pop("distribution"), "n": record.pop("n", HERTZ),
+                        "momentum_conserving": bool(record.pop("momentum_conserving", False))}
+    if record.get("integrator") == "dp5" and "rtol" in record and "atol" in record:
+        record["integrator"] = DP5(record.pop("rtol"), record.pop("atol")).describe()
+    return record
+
+
 def current_record(record: dict) -> dict:
     """A stored parameter record in the form this version writes, so that a store of an earlier
     granchain that computed the same numbers compares equal: the package version it names becomes
     its results version (:data:`granchain._version.RESULTS_OF_VERSION`; an unknown version is left
     as it is, and the comparison then refuses it), and the family record is today's (fields whose
-    meaning changed, such as TaperedDecorated's q, read in their own version's meaning)."""
+    meaning changed, such as TaperedDecorated's q, read in their own version's meaning). A record of
+    granchain 0.1.0, which named its family and integrator by flat fields, gets both as records."""
     record = dict(record)
+    if "family" not in record and "n_large" in record and "distribution" in record:
+        record = _record_of_010(record)
     if "results_version" not in record and record.get("granchain_version") in RESULTS_OF_VERSION:
         record["results_version"] = RESULTS_OF_VERSION[record.pop("granchain_version")]
     if isinstance(record.get("family"), dict):
@@ -835,8 +896,185 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
 
 
 def stored_record(ds, key: str = "family") -> dict | None:
-    """The family (``key="family"``), integrator or run record stored in a Dataset's attributes
-    (None for stores written before granchain 0.2, which hold no family record)."""
-    name = {"family": "granchain_family", "integrator": "granchain_integrator", "parameters": "granchain_parameters"}[key]
+    """The family (``key="family"``), integrator or run (``"parameters"``) record of an ensemble, in the
+    form this version writes (:func:`current_record`: a record of an earlier version is read in its own
+    meaning). ``ds``: a Dataset (``run_ensemble``'s result, a store opened by any reader) or the path of
+    a store (:func:`open_store`). None where the Dataset holds no such record."""
+    if isinstance(ds, (str, os.PathLike)):
+        ds = open_store(ds)
+    params = ds.attrs.get("granchain_parameters")
+    record = current_record(json.loads(params)) if params is not None else {}
+    if key == "parameters":
+        return record or None
+    name = {"family": "granchain_family", "integrator": "granchain_integrator"}[key]
     text = ds.attrs.get(name)
-    return None if text is None else json.loads(text)
+    if text is not None:
+        stored = json.loads(text)
+        return _current_family_record(stored) if key == "family" else stored
+    found = record.get(key)  # records of granchain 0.1.0 have neither attribute: its parameters name both
+    return found if isinstance(found, dict) else None
+
+
+# ---------------------------------------------------------------------- reading a store
+#: Root attributes that say where and when a store was written (kept as stored by :func:`open_store`);
+#: every other attribute granchain writes follows from the parameter record and is given in today's form.
+_PROVENANCE = ("created", "history", "granchain_version", "numpy_version", "scipy_version", "numba_version", "source")
+
+_WHAT_TO_GIVE = ("give the path of an ensemble store written by `granchain ensemble --out PATH` or "
+                 "granchain.run_ensemble(..., out=PATH), or a netCDF file written by `granchain export`")
+
+
+def open_store(path, *, group: str | None = None, load: bool = False):
+    """An ensemble store as an ``xarray.Dataset``, read in the form this version writes.
+
+    Every granchain reader (the analysis, the figures, ``granchain info``, ``export``, ``theory``, the
+    jackknife over chunks) opens stores with it. Nothing is written: a store of an earlier version is
+    brought up to date in the returned Dataset only (resuming it with :func:`granchain.run_ensemble`
+    rewrites its metadata on disk). ``xarray.open_dataset(path, engine="zarr")`` still opens a store
+    without granchain, as stored.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A Zarr store (format 2) written by :func:`granchain.run_ensemble` (``out=``) or ``granchain
+        ensemble --out``, finished or not, or a netCDF file written by ``granchain export``.
+    group : None or "progress"
+        None: the results. ``"progress"``: the per-chunk fixed-point sums, checksums and done flags
+        (Zarr stores only).
+    load : bool
+        False: lazy (Dask arrays, read when used). True: every value read into memory.
+
+    Returns
+    -------
+    xarray.Dataset
+        The stored values, unchanged. The records (attributes ``granchain_parameters``,
+        ``granchain_family``, ``granchain_integrator``) are in today's form (the compatibility layer
+        ``granchain.ensembles.store.current_record`` that a resume compares records with:
+        ``results_version`` instead of the package version, earlier meanings of family fields
+        translated, and for a store of granchain 0.1.0 its family and integrator as records); the other
+        attributes granchain writes and the variables' metadata (units, long_name, flags) are those a
+        store of the same parameters gets today, except where and when it was written (``created``,
+        ``history``, the versions), kept as stored, as is any attribute granchain does not write (the
+        ``physical_*`` scale of ``granchain ensemble --material``). The integers an exported netCDF
+        file holds in 32 bits are read back in the store's dtypes.
+
+    Raises
+    ------
+    ValueError
+        For a path that is not a granchain store (it says what to give instead), a store whose
+        metadata cannot be read (``granchain info PATH`` says what is damaged), or another group.
+    """
+    import xarray as xr
+
+    if group not in (None, "progress"):
+        raise ValueError(f"group must be None (the results) or 'progress' (the per-chunk sums and done flags), got {group!r}")
+    try:
+        text = os.fsdecode(os.fspath(path))
+    except TypeError:
+        raise ValueError(f"path must be a str or os.PathLike naming a store, got {path!r}") from None
+    if os.path.isdir(text):
+        params = stored_parameters(text)
+        if params is None:
+            raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters record in "
+                             f"{os.path.join(text, '.zattrs')} or {os.path.join(text, 'progress', '.zattrs')}): {_WHAT_TO_GIVE}")
+        opener = lambda: xr.open_zarr(text, group=group, consolidated=False, zarr_format=2)  # noqa: E731
+    elif os.path.isfile(text):
+        with open(text, "rb") as f:
+            magic = f.read(8)
+        if not (magic.startswith(b"CDF") or magic == b"\x89HDF\r\n\x1a\n"):
+            raise ValueError(f"{text} is neither a Zarr store (a directory) nor a netCDF file: {_WHAT_TO_GIVE}")
+        if group is not None:
+            raise ValueError(f"{text} is a netCDF export, which holds the results only: open the Zarr store it was "
+                             f"exported from for the {group!r} group")
+        params = None
+        opener = lambda: xr.open_dataset(text)  # noqa: E731 -- the netCDF engine that reads the file
+    else:
+        raise ValueError(f"{text} does not exist: {_WHAT_TO_GIVE}")
+    try:
+        ds = opener()
+    except Exception as exc:  # noqa: BLE001 -- damaged metadata, a missing netCDF engine: said with what to do
+        raise ValueError(_unreadable(text, exc)) from None
+    try:
+        params = ds.attrs.get("granchain_parameters", params)
+        if not isinstance(params, str):
+            raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters attribute): {_WHAT_TO_GIVE}")
+        if load:
+            try:
+                ds.load()
+            except Exception as exc:  # noqa: BLE001 -- a truncated or garbled chunk
+                raise ValueError(_unreadable(text, exc)) from None
+        result = _todays_form(ds, group, params)
+    except BaseException:
+        ds.close()
+        raise
+    if load:
+        ds.close()  # the values are in memory: no file stays open
+    return result
+
+
+def _unreadable(path: str, exc: BaseException) -> str:
+    hint = (" (reading netCDF needs the netCDF4 package: pip install 'granchain[netcdf]')"
+            if os.path.isfile(path) and "engine" in str(exc) else "")
+    return (f"{path} could not be read ({_short(exc)}){hint}; `granchain info {path}` says what is damaged, and running "
+            "the ensemble command again (same arguments) repairs it")
+
+
+def _todays_form(ds, group, params: str):
+    """``ds`` (just opened, ours to change) with its records and metadata in today's form (see :func:`open_store`)."""
+    try:
+        record = current_record(json.loads(params))
+    except ValueError:
+        raise ValueError("the store's parameter record is not valid JSON: run the ensemble command again (same "
+                         "arguments) to restore it from the other copy, or `granchain info` on the store") from None
+    if group == "progress":
+        _set_metadata(ds, {v.name: v.metadata() for v in PROGRESS + PROGRESS_ALIGNED} | {"checked": _CHECKED_ATTRS})
+        ds.attrs.update(granchain_parameters=json.dumps(record, sort_keys=True), about=_PROGRESS_ABOUT)
+        return ds
+    records = {"granchain_parameters": json.dumps(record, sort_keys=True)}
+    for key, name in (("family", "granchain_family"), ("integrator", "granchain_integrator")):
+        if isinstance(record.get(key), dict):
+            records[name] = json.dumps(record[key], sort_keys=True)
+    spec = _spec_of(record, ds)
+    if spec is None:  # a CustomFamily (its function is not stored): the records and the results' metadata
+        _set_metadata(ds, {v.name: v.metadata() for v in RESULTS + FORCES + WALL + AVERAGED + ALIGNED})
+        ds.attrs.update(records)
+        return ds
+    reference = empty_dataset(spec, lazy=True)
+    for name, ref in reference.variables.items():  # a netCDF export's 32-bit integers, back in the store's dtypes
+        if name in ds.variables and ds[name].dtype != ref.dtype and ds[name].dtype.kind in "iu" and ref.dtype.kind in "iu":
+            cast = ds[name].astype(ref.dtype)
+            ds = ds.assign_coords({name: cast}) if name in ds.coords else ds.assign({name: cast})
+    _set_metadata(ds, {name: ref.attrs for name, ref in reference.variables.items()})
+    # Attributes a store of these parameters gets today; where and when it was written as stored, and any
+    # attribute granchain does not write itself (the physical scale of `granchain ensemble --material`, a user's) kept.
+    ds.attrs = {**ds.attrs, **reference.attrs, **records, **{k: ds.attrs[k] for k in _PROVENANCE if k in ds.attrs}}
+    return ds
+
+
+def _set_metadata(ds, attrs: dict) -> None:
+    for name, value in attrs.items():
+        if name in ds.variables:
+            ds.variables[name].attrs = dict(value)
+
+
+def _spec_of(record: dict, ds):
+    """The run a store's record (today's form) describes, on the store's own time and lag grids; None where
+    it cannot be rebuilt (a CustomFamily, whose function is not stored, or an incomplete record)."""
+    import warnings
+
+    from ..families import family_from_record
+    from ..solve.integrators import RunControls, integrator_from_record
+    from .run import EnsembleSpec
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # warned about when the ensemble was made
+            per_chain = record.get("chain_integrators")
+            return EnsembleSpec(
+                family_from_record(record["family"]), record["realizations"], record["seed"], tuple(record["chains"]),
+                None if per_chain else integrator_from_record(record["integrator"]), np.asarray(ds["time"].values),
+                record["chunk_size"], RunControls(record["exit_margin"], record["max_steps"], record["peak_rtol"]),
+                np.asarray(ds["lag"].values) if "lag" in ds.coords else None,
+                chain_integrators={k: integrator_from_record(r) for k, r in per_chain.items()} if per_chain else None)
+    except (KeyError, TypeError, ValueError):
+        return None

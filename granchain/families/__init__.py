@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-import json
 import warnings
 from dataclasses import dataclass, field
 from typing import Callable, ClassVar, NamedTuple
@@ -764,17 +763,15 @@ def family_from_record(record: dict) -> ChainFamily:
 
 
 def family_from_dataset(ds) -> ChainFamily:
-    """The family of an ensemble Dataset (``run_ensemble``'s result or a store opened with xarray),
-    rebuilt from its stored record. A store written by granchain 0.1.0 holds no family record: its
-    parameters then describe the :class:`RandomDecorated` it was. Raises ValueError for a
+    """The family of an ensemble Dataset (``run_ensemble``'s result or a store opened with
+    :func:`granchain.open_store` or xarray) or of the store at a path, rebuilt from its stored record
+    (read through the store's compatibility layer: a store written by granchain 0.1.0 holds no family
+    record, its parameters then describe the :class:`RandomDecorated` it was). Raises ValueError for a
     :class:`CustomFamily` (its function is not stored) or a Dataset that is no ensemble."""
-    record = ds.attrs.get("granchain_family")
-    if record is not None:
-        return family_from_record(json.loads(record))
-    params = json.loads(ds.attrs.get("granchain_parameters", "{}"))
-    if "n_large" in params and "distribution" in params:  # granchain 0.1.0
-        return family_from_record({"family": RandomDecorated.kind, "n_large": params["n_large"],
-                                   "distribution": params["distribution"], "n": params.get("n", HERTZ),
-                                   "momentum_conserving": bool(params.get("momentum_conserving", False))})
-    raise ValueError("this Dataset holds no granchain family record (granchain_family attribute): "
-                     "is it an ensemble written by granchain.run_ensemble?")
+    from ..ensembles.store import stored_record
+
+    record = stored_record(ds, "family")
+    if record is None:
+        raise ValueError("this Dataset holds no granchain family record (granchain_family attribute): "
+                         "is it an ensemble written by granchain.run_ensemble?")
+    return family_from_record(record)

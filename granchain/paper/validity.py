@@ -188,9 +188,8 @@ def compare_paired(ds, progress) -> dict:
 
 def _run_point(dist, N: int, realizations: int, seed: int, blocks: int, path, integrator, progress: bool) -> dict:
     """Run (or resume) one paired ensemble into ``path`` and measure it."""
-    import xarray as xr
-
     from ..ensembles.run import run_ensemble
+    from ..ensembles.store import open_store
     from ..families import RandomDecorated
 
     chunk = -(-realizations // blocks)
@@ -203,7 +202,7 @@ def _run_point(dist, N: int, realizations: int, seed: int, blocks: int, path, in
     for w in caught:  # anything else is re-issued
         if not issubclass(w.category, EffectiveValidityWarning):
             warnings.warn(w.message, w.category, stacklevel=3)
-    prog = xr.open_zarr(path, group="progress", consolidated=False).load()
+    prog = open_store(path, group="progress", load=True)
     res = compare_paired(ds, prog)
     res["beyond_effective_validity"] = int(warned)
     res["failed_realizations"] = int(np.sum(np.any(ds["status"].values != 0, axis=0)))

@@ -56,7 +56,9 @@ def _measured(measured, distribution, n_large):
                     ("mean_peak_velocity", "averaged_peak_velocity", "arrival_time_std")} | {"source": f"granchain ensemble{size}"}
         return None
     if isinstance(measured, (str, Path)):
-        return _from_dataset(xr.open_zarr(measured, consolidated=False), f"store {Path(measured).name}")
+        from ...ensembles.store import open_store
+
+        return _from_dataset(open_store(measured), f"store {Path(measured).name}")
     return _from_dataset(measured, "ensemble")
 
 
