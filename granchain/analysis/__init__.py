@@ -664,7 +664,12 @@ def compare_curves(f, g, x) -> CurveComparison:
 # here lazily (PEP 562 module __getattr__): importing this module does not import them, and the
 # package's import graph has no cycle (tests/test_imports.py).
 from .jackknife import (  # noqa: E402
-    ChunkSums, Jackknife, block_jackknife, block_labels, chunk_jackknife, jackknife_stderr,
+    ChunkSums,
+    Jackknife,
+    block_jackknife,
+    block_labels,
+    chunk_jackknife,
+    jackknife_stderr,
 )
 
 _PULSEFITS = ("CurveAgreement", "PulseFit", "averaged_peak_gap", "fit_averaged_arrival", "fit_averaged_decay",

@@ -32,8 +32,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from .. import Uniform
-    from .. import bca
+    from .. import Uniform, bca
     from .._validate import count
 
     N = count("--large", args.large, minimum=2)

@@ -129,8 +129,8 @@ def _pair(text: str) -> tuple:
 
 def build_family(args):
     """The chain family the arguments describe."""
-    from ..model.distributions import Uniform
     from ..families import BinaryRandom, RandomDecorated, RandomRadii, TaperedDecorated
+    from ..model.distributions import Uniform
 
     lo, hi = DEFAULT_INTERVAL.get(args.family, (None, None))
     if args.family == "binary":
@@ -250,5 +250,5 @@ def run(args) -> int:
           f"{json.loads(ds.attrs['granchain_integrator'])['name']}; failed integrations: {failed}")
     if units is not None:
         print(_physical_summary(ds, units))
-        print(f"the store's attributes physical_* hold the scale; granchain.units.dataset_to_physical(ds, scale) adds SI variables")
+        print("the store's attributes physical_* hold the scale; granchain.units.dataset_to_physical(ds, scale) adds SI variables")
     return 0

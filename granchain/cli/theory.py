@@ -94,8 +94,7 @@ def _summary(pred, meas, k_lo: int = 4) -> str:
 
 
 def run(args) -> int:
-    from .. import Uniform
-    from .. import theory
+    from .. import Uniform, theory
     from .._validate import count
 
     N = count("--large", args.large, minimum=2)

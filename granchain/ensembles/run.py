@@ -20,13 +20,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._validate import count
+from .._version import RESULTS_VERSION
+from ..families import ChainFamily, RandomDecorated
 from ..model.chain import HERTZ
 from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
 from ..solve.simulation import time_limit
 from .store import WALL, MemorySink, Variable, ZarrSink
-from .._validate import count
-from .._version import RESULTS_VERSION
-from ..families import ChainFamily, RandomDecorated
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
 

@@ -35,11 +35,23 @@ from typing import Callable, ClassVar, NamedTuple
 
 import numpy as np
 
-from ..model.chain import HERTZ, Chain, decorated, from_radii, sphere_mass, sphere_stiffness, wall_stiffness
-from ..model.distributions import as_distribution, distribution_from_record, small_radius_distribution
+from .._validate import count, exponent, finite_scalar
+from ..model.chain import (
+    HERTZ,
+    Chain,
+    decorated,
+    from_radii,
+    sphere_mass,
+    sphere_stiffness,
+    wall_stiffness,
+)
+from ..model.distributions import (
+    as_distribution,
+    distribution_from_record,
+    small_radius_distribution,
+)
 from ..model.effective import effective, effective_parameters
 from ..model.random import realization_rng
-from .._validate import count, exponent, finite_scalar
 
 __all__ = [
     "FAMILIES",

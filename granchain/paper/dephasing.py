@@ -268,9 +268,9 @@ def disorder_split(n_large: int = 26, distribution=None, realizations: int = 100
     """<max_t v_k> of the effective chain with only its mass disorder, or only its stiffness disorder
     (Hertz, n = 5/2), on the radii RandomDecorated(n_large, distribution) draws for ``seed``: which
     disorder makes single-realisation peaks decay? Returns {"mass": PerGranule, "stiffness": PerGranule}."""
-    from ..model.distributions import small_radius_distribution
     from ..ensembles.run import run_ensemble
     from ..families import CustomFamily
+    from ..model.distributions import small_radius_distribution
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", EffectiveValidityWarning)

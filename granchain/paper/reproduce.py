@@ -15,10 +15,10 @@ import time
 from pathlib import Path
 
 from .. import __version__, analysis
-from ..model.distributions import Uniform
 from ..ensembles.run import default_time_grid, run_ensemble
-from .report import Record, build_records, markdown_table
 from ..ensembles.store import stored_record
+from ..model.distributions import Uniform
+from .report import Record, build_records, markdown_table
 
 PAPER_N = (6, 11, 16, 26)
 CITATION = ("U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg, "
@@ -72,11 +72,7 @@ def figures(datasets: dict, out: Path, quick: bool, sums_by_N: dict | None = Non
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .figures import save
-    from .figures import fig1
-    from .figures import fig2
-    from .figures import fig3
-    from .figures import fig4
+    from .figures import fig1, fig2, fig3, fig4, save
 
     N_fig1 = 11 if 11 in datasets else min(datasets)
     N_fig23 = 26 if 26 in datasets else max(datasets)

@@ -35,16 +35,15 @@ import datetime as _dt
 import hashlib
 import json
 import math
-import os
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from .. import analysis, bca
-from ..model.distributions import Uniform, as_distribution
 from .._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
 from .._version import __version__
+from ..model.distributions import Uniform, as_distribution
 from ..units import rescaled_attrs
 
 __all__ = ["MEASURES", "DEFAULT_ALPHAS", "DEFAULT_BETAS", "QUICK", "validity_map", "compare_distributions",

@@ -13,8 +13,16 @@ from __future__ import annotations
 
 from numba import njit
 
-from .dense import (ROOT_ACCELERATION, ROOT_APPROACH, dense_compression, dense_value, falls, first_root,
-                    hermite_max_estimate, weights)
+from .dense import (
+    ROOT_ACCELERATION,
+    ROOT_APPROACH,
+    dense_compression,
+    dense_value,
+    falls,
+    first_root,
+    hermite_max_estimate,
+    weights,
+)
 from .forces import contact_force
 from .jit import JIT_INLINE
 from .peaks import is_new_peak

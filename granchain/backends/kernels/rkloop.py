@@ -20,10 +20,22 @@ from .forces import accelerations
 from .jit import JIT, JIT_INLINE
 from .memory import borrowed, keep_alive
 from .onstep import force_peaks, grid_samples, velocity_peaks
-from .peaks import final_force_peaks, final_peaks, initial_force_records, initial_records, write_info
+from .peaks import (
+    final_force_peaks,
+    final_peaks,
+    initial_force_records,
+    initial_records,
+    write_info,
+)
 from .records import KIND_DP5, KIND_RKN4, Dense, Forces, Model, Outputs, Run, State
 from .stop import end_of_step, stop_time
-from .window import advance_window, initial_window, is_finite_window, leave_window, open_contact_behind
+from .window import (
+    advance_window,
+    initial_window,
+    is_finite_window,
+    leave_window,
+    open_contact_behind,
+)
 
 SAFETY = 0.9
 BETA = 0.08  # PI controller: Gustafsson's value, few rejections when stability limits the step

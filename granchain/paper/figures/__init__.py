@@ -6,10 +6,7 @@
 * :mod:`~granchain.paper.figures.fig4` - arrival-time distributions at granule N-1 (N = 6, 11, 16, 26) vs the BCA, and d vs N.
 """
 
-from . import fig1
-from . import fig2
-from . import fig3
-from . import fig4
+from . import fig1, fig2, fig3, fig4
 from ._style import save
 
 __all__ = ["fig1", "fig2", "fig3", "fig4", "save"]

@@ -27,8 +27,8 @@ def _bca_slope(ds) -> float:
     uniform distribution, quadrature (:func:`granchain.bca.slope`) for any other. NaN for a
     family Eq. (slope) does not describe (it assumes unit large granules: undecorated and tapered
     families)."""
-    from ...model.distributions import Uniform
     from ...families import RandomDecorated, family_from_dataset
+    from ...model.distributions import Uniform
 
     family = family_from_dataset(ds)
     if not isinstance(family, RandomDecorated):
