@@ -25,7 +25,7 @@ from .families import (
     family_from_record,
 )
 from .ensembles.run import ENSEMBLE_ATOL, ENSEMBLE_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, EnsembleSpec, default_time_grid, ensemble_integrator, run_ensemble
-from .ensembles.store import open_store
+from .ensembles.read import open_store
 from .units import Material, Scale, scale, to_physical  # physical units; the rest in granchain.units
 
 __all__ = [

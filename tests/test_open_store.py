@@ -25,8 +25,8 @@ import scipy.stats as st
 import xarray as xr
 
 import granchain as gc
+from granchain.ensembles import read, schema, store
 from granchain.ensembles import run as ens
-from granchain.ensembles import store
 
 DATA = Path(__file__).parent / "data"
 PACKAGE = Path(gc.__file__).parent
@@ -59,7 +59,7 @@ def assert_same_values(a: xr.Dataset, b: xr.Dataset) -> None:
 
 # -- open_store on stores of this version and of earlier ones ----------------------------------------
 def test_one_function_in_three_places():
-    assert gc.open_store is store.open_store is gc.ensembles.open_store
+    assert gc.open_store is read.open_store is gc.ensembles.open_store
     assert "open_store" in gc.__all__ and "open_store" in gc.ensembles.__all__
 
 
@@ -174,7 +174,9 @@ def test_other_groups_and_damaged_stores_are_refused_with_what_to_do(fresh, tmp_
     (damaged / "peak_time" / ".zarray").write_text("{ not json")
     with pytest.raises(ValueError, match=r"could not be read.*granchain info"):
         gc.open_store(damaged)
-    from granchain.cli import info  # which still reports what it can read of such a store, and what is damaged
+    from granchain.cli import (
+        info,  # which still reports what it can read of such a store, and what is damaged
+    )
 
     facts = info.summary(str(damaged))
     assert "could not be read" in facts["unreadable"] and facts["realizations"] == RUN["realizations"]
@@ -206,15 +208,19 @@ def test_the_check_finds_direct_opens():
 
 
 def test_no_module_but_the_store_opens_zarr_with_xarray():
+    """Only the store's own modules open Zarr with xarray: the writer (``store``: resuming, checking
+    chunks) and the reader (``read``: :func:`granchain.open_store`); every other module goes through
+    ``open_store``."""
+    own = {PACKAGE / "ensembles" / "store.py", PACKAGE / "ensembles" / "read.py"}
     found = {}
     for path in sorted(PACKAGE.rglob("*.py")):
-        if path == PACKAGE / "ensembles" / "store.py":
+        if path in own:
             continue
         lines = opens_zarr_directly(path.read_text())
         if lines:
             found[str(path.relative_to(PACKAGE))] = lines
     assert found == {}, f"open stores with granchain.open_store, not xarray directly: {found}"
-    assert opens_zarr_directly((PACKAGE / "ensembles" / "store.py").read_text())  # the one place that does
+    assert all(opens_zarr_directly(path.read_text()) for path in own)  # the places that do
 
 
 def test_every_reader_given_a_path_calls_open_store(fresh, tmp_path, monkeypatch):
@@ -224,13 +230,13 @@ def test_every_reader_given_a_path_calls_open_store(fresh, tmp_path, monkeypatch
     from granchain.paper.figures import theory as fig_theory
 
     calls = []
-    real = store.open_store
+    real = read.open_store
 
     def spy(path, **kw):
         calls.append((str(path), kw.get("group")))
         return real(path, **kw)
 
-    monkeypatch.setattr(store, "open_store", spy)
+    monkeypatch.setattr(read, "open_store", spy)
     readers = {
         "family_from_dataset": lambda: gc.family_from_dataset(fresh),
         "stored_record": lambda: store.stored_record(fresh, "parameters"),
@@ -249,9 +255,9 @@ def test_every_reader_given_a_path_calls_open_store(fresh, tmp_path, monkeypatch
         readers["granchain export"] = lambda: export(fresh, tmp_path / "x.nc", force=True)
     except ImportError:
         pass
-    for label, read in readers.items():
+    for label, reader in readers.items():
         calls.clear()
-        read()
+        reader()
         assert (str(fresh), None) in calls or (str(fresh), "progress") in calls, label
     calls.clear()
     analysis.ChunkSums.from_store(fresh)
@@ -262,8 +268,8 @@ def test_the_validity_map_reads_its_sums_through_open_store(tmp_path, monkeypatc
     from granchain.paper import validity
 
     calls = []
-    real = store.open_store
-    monkeypatch.setattr(store, "open_store", lambda path, **kw: calls.append((Path(path), kw.get("group"))) or real(path, **kw))
+    real = read.open_store
+    monkeypatch.setattr(read, "open_store", lambda path, **kw: calls.append((Path(path), kw.get("group"))) or real(path, **kw))
     path = tmp_path / "point.zarr"
     res = validity._run_point(gc.Uniform(0.05, 0.3), 4, 8, 1, 2, path, gc.DP5.relaxed(), False)
     assert (path, "progress") in calls and res["valid_realizations"] == 8
@@ -300,7 +306,7 @@ def marker(monkeypatch):
     """A per-realisation result added to the schema (dtype and fill of its own), which the integrator
     fills with the number of granules of the chain it integrates."""
     added = store.Variable("marker", ("chain", "realization"), "int16", -7, "1", "granules of the chain (test)")
-    monkeypatch.setattr(store, "RESULTS", store.RESULTS + (added,))
+    monkeypatch.setattr(schema, "RESULTS", schema.RESULTS + (added,))
     seen = []
     integrate = gc.Integrator.integrate_batch
 

@@ -39,8 +39,8 @@ BOXES = {
                  "realisation i -> one chain:\nRandomDecorated, TaperedDecorated,\nRandomRadii, BinaryRandom,\n"
                  "CustomFamily"),
     "ensembles": (5.5, 6.75, 4.9, 2.2, RUN, False, "granchain.ensembles",
-                  "run: chunks, seeds from (seed, i), Dask\nstore: one schema table, resume,\nchecksums, "
-                  "results_version\nlock: one writer per store"),
+                  "run: chunks, seeds from (seed, i), Dask\nschema: the one table of variables\nstore: write, resume, checksums\n"
+                  "read: open_store; lock: one writer"),
     "stats": (11.0, 6.75, 4.6, 2.2, STATS, True, "statistics and theories",
               "granchain.analysis\n(+ pulsefits, jackknife)\ngranchain.bca (BCA)\ngranchain.theory"),
     "backends": (1.4, 4.15, 5.9, 1.95, CORE, False, "granchain.backends",

@@ -459,7 +459,7 @@ def _dataset(ds):
     import os
 
     if isinstance(ds, (str, os.PathLike)):
-        from ..ensembles.store import open_store
+        from ..ensembles.read import open_store
 
         try:
             return open_store(ds)

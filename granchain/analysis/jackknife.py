@@ -109,7 +109,7 @@ class ChunkSums:
     def from_store(cls, path) -> "ChunkSums":
         """Read the ``progress`` group of a ``run_ensemble`` Zarr store (finished chunks only;
         :func:`granchain.open_store`)."""
-        from ..ensembles.store import open_store
+        from ..ensembles.read import open_store
 
         root = open_store(path)
         prog = open_store(path, group="progress", load=True)

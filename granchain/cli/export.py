@@ -36,7 +36,7 @@ def cf_dataset(ds):
     import scipy
 
     from .. import __version__
-    from ..ensembles.store import AVERAGED, FORCES, RESULTS, WALL
+    from ..ensembles.schema import AVERAGED, FORCES, RESULTS, WALL
 
     flags = {v.name: v.attrs for v in RESULTS + FORCES + WALL + AVERAGED if "flag_values" in v.attrs}
     out = ds.copy()
@@ -80,7 +80,7 @@ def export(store, file, force: bool = False) -> str:
     """Write ``store`` as a CF-1.8 netCDF file (returns the path)."""
     import warnings
 
-    from ..ensembles.store import open_store
+    from ..ensembles.read import open_store
 
     try:
         import netCDF4  # noqa: F401

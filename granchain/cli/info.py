@@ -43,12 +43,8 @@ def summary(path: str) -> dict:
     import numpy as np
 
     from ..ensembles.lock import StoreLock
-    from ..ensembles.store import (
-        current_record,
-        open_store,
-        stored_parameters,
-        verify_chunks,
-    )
+    from ..ensembles.read import open_store
+    from ..ensembles.store import current_record, stored_parameters, verify_chunks
 
     if not os.path.isdir(path):
         raise ValueError(f"{path} is not a directory: give the path of a Zarr store written by granchain ensemble")

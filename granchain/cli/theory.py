@@ -42,7 +42,7 @@ def add_parser(subparsers) -> None:
 
 def _measured(store, N: int, dist_label: str) -> dict:
     from .. import analysis
-    from ..ensembles.store import open_store
+    from ..ensembles.read import open_store
 
     path = Path(store)
     if not path.exists():

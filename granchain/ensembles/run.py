@@ -240,11 +240,11 @@ def _merge(parts: list, spec: EnsembleSpec) -> dict:
         elif key in axis:
             out[key] = np.concatenate([p[key] for p in parts], axis=axis[key])
         else:
-            raise KeyError(f"chunk result {key!r} is neither a store variable nor a sum: add it to the schema (granchain/ensembles/store.py)")
+            raise KeyError(f"chunk result {key!r} is neither a store variable nor a sum: add it to the schema (granchain/ensembles/schema.py)")
     return out
 
 
-# The compute buffers come from the store schema (granchain.ensembles.store): a chunk's result holds every
+# The compute buffers come from the store schema (granchain.ensembles.schema): a chunk's result holds every
 # result and progress sum of the schema under its name, allocated with the Variable's dtype and fill value
 # and its dims' sizes, so a variable added to the schema gets its buffer, reaches the integrator in
 # ``out`` (``Integrator.integrate_batch``) and is written to the store. Where the kernels' conventions
@@ -281,8 +281,8 @@ def _store_layout(buffer: np.ndarray, v: Variable) -> np.ndarray:
 
 def chunk_buffers(spec: EnsembleSpec, realizations: int) -> dict:
     """Arrays at their not-computed values for ``realizations`` realisations of every chain, by kernel name: each
-    result of :func:`~granchain.ensembles.store.result_variables` (dims ``chain``, ``realization``, ...) and each
-    progress sum (:func:`~granchain.ensembles.store.progress_sum_variables`, in :func:`_kernel_dims`), plus the
+    result of :func:`~granchain.ensembles.schema.result_variables` (dims ``chain``, ``realization``, ...) and each
+    progress sum (:func:`~granchain.ensembles.schema.progress_sum_variables`, in :func:`_kernel_dims`), plus the
     kernel-only arrays :data:`PACKED` (the members share dims, dtype and fill) and :data:`UNSTORED`. The
     kernels add into the sums, which start at their fill value, 0."""
     from .store import progress_sum_variables, result_variables, sizes
@@ -300,7 +300,7 @@ def chunk_buffers(spec: EnsembleSpec, realizations: int) -> dict:
 
 
 def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
-    """Chunk j (or its realisations ``sl``): a dict holding every :func:`~granchain.ensembles.store.chunk_variables`
+    """Chunk j (or its realisations ``sl``): a dict holding every :func:`~granchain.ensembles.schema.chunk_variables`
     entry under its name (per-realisation arrays over the realisations computed, the progress sums without
     their ``chunk`` dim), plus ``chunk`` and ``realizations``."""
     from .store import progress_sum_variables, result_variables

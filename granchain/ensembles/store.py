@@ -1,213 +1,46 @@
-"""The ensemble store: one schema table, the in-memory and Zarr sinks, the resume check and the reader.
+"""Writing a store and resuming it: the in-memory and Zarr sinks, the stored records and their
+compatibility layer (records of earlier versions read in today's form), and the resume check.
 
-The schema (:data:`RESULTS`, :data:`AVERAGED`, :data:`PROGRESS`, plus the family's own
-random parameters) is the single place that names the variables, their dimensions, dtypes, fill
-values and metadata: the ensemble runner allocates its compute buffers from it
-(:func:`chunk_variables`), and the writer, the resume check, the reader :func:`open_store` (which
-every granchain reader uses), the analysis and the tests read it.
-
-Layout of a store (dims ``chain``, ``realization``, ``granule`` = the family's observed
-granules, ``time``, and the family's parameter dims such as ``gap``):
-
-* root group: the family's random parameters ``(realization, ...)``, the per-realisation
-  results ``(chain, realization[, granule])``, the averaged pulse ``(chain, granule, time)``;
-  attributes: the family, integrator and run records (JSON) and every parameter;
-* ``progress`` group: per chunk of realisations the fixed-point sums of the averaged pulse
-  and a ``done`` flag (sums first, flag last; Zarr writes each storage chunk atomically).
+What is stored is the schema's (:mod:`~granchain.ensembles.schema`, re-exported here); reading a store
+is :func:`granchain.open_store` (:mod:`~granchain.ensembles.read`).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 import os
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._status import NOT_COMPUTED, Status, describe_codes
+from .._status import describe_codes
 from .._version import RESULTS_OF_VERSION, __version__
-from ..units import RESCALED, rescaled_attrs
-
-__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "MemorySink",
-           "ZarrSink", "StoreRepairWarning", "open_store", "stored_record", "check_same_parameters", "checked_variables",
-           "result_variables", "per_realisation_variables", "progress_sum_variables", "chunk_variables"]
-
-#: Rescaled quantities are stored as dimensionless numbers (units "1": pint, pint-xarray and UDUNITS
-#: read them), with what they count in ``rescaled_quantity``/``units_description`` (granchain.units).
-UNITS_V = rescaled_attrs("velocity")
-UNITS_T = rescaled_attrs("time")
-UNITS_F = rescaled_attrs("force")
-
-
-@dataclass(frozen=True)
-class Variable:
-    """One stored variable: dimensions, dtype, fill value (= not computed) and metadata."""
-
-    name: str
-    dims: tuple
-    dtype: str
-    fill: object
-    units: str | dict  # a units string pint parses, or rescaled_attrs(kind) for a rescaled quantity
-    long_name: str
-    attrs: dict = field(default_factory=dict)
-
-    def metadata(self) -> dict:
-        units = dict(self.units) if isinstance(self.units, dict) else {"units": self.units}
-        return {**units, "long_name": self.long_name, **self.attrs}
-
-
-#: Per-realisation results of every chain.
-RESULTS = (
-    Variable("peak_velocity", ("chain", "realization", "granule"), "float64", np.nan, UNITS_V,
-             "maximum velocity of large granule k in the realisation"),
-    Variable("peak_time", ("chain", "realization", "granule"), "float64", np.nan, UNITS_T,
-             "time of the maximum velocity of large granule k (arrival time)"),
-    Variable("status", ("chain", "realization"), "int8", NOT_COMPUTED, "1",
-             "integration status (0 = success; -1 = not computed)",
-             {"flag_values": [NOT_COMPUTED] + [int(s) for s in Status],
-              "flag_meanings": " ".join(["NOT_COMPUTED"] + [s.name for s in Status])}),
-    Variable("energy_error", ("chain", "realization"), "float64", np.nan, "1", "relative energy drift (E_end - E_0)/E_0"),
-    Variable("n_steps", ("chain", "realization"), "int64", -1, "1", "accepted integration steps"),
-    Variable("t_end", ("chain", "realization"), "float64", np.nan, UNITS_T, "time the integration stopped"),
+from .schema import (  # the schema's names, as before it had a module of its own
+    ALIGNED,
+    AVERAGED,
+    FORCES,
+    PROGRESS,
+    PROGRESS_ALIGNED,
+    PROGRESS_SUMS,
+    RESULTS,
+    UNITS_T,
+    WALL,
+    Variable,
+    averaged_variables,
+    checked_variables,
+    chunk_variables,
+    digest,
+    parameter_variables,
+    per_realisation_variables,
+    progress_sum_variables,
+    progress_sums,
+    progress_variables,
+    result_variables,
+    sizes,
 )
 
-#: Peak contact forces per realisation. The ``contact`` dimension is the family's
-#: (:meth:`granchain.ChainFamily.contact_coordinate`), the same for every chain of the family:
-#: decorated families, contact q on the right of large granule q (decorated chain: large granule q
-#: and small granule q; effective chain: q and q+1); other families, every contact (q and q+1).
-FORCES = (
-    Variable("peak_force", ("chain", "realization", "contact"), "float64", np.nan, UNITS_F,
-             "maximum contact force c delta^(n-1) of contact q (decorated families: the contact on the right of "
-             "large granule q; other families: between granules q and q+1)"),
-    Variable("peak_force_time", ("chain", "realization", "contact"), "float64", np.nan, UNITS_T,
-             "time of the maximum force of contact q (the compression maximum)"),
-)
-
-#: Families with a rigid wall at the far end (``wall=True``): the wall contact's peak force.
-WALL = (
-    Variable("peak_wall_force", ("chain", "realization"), "float64", np.nan, UNITS_F,
-             "maximum force on the rigid wall at the far end of the chain"),
-    Variable("peak_wall_force_time", ("chain", "realization"), "float64", np.nan, UNITS_T,
-             "time of the maximum force on the wall"),
-)
-
-
-def result_variables(family) -> tuple:
-    """The per-realisation results a family's store holds: :data:`RESULTS`, :data:`FORCES`, and
-    :data:`WALL` when its chains end in a wall."""
-    return RESULTS + FORCES + (WALL if family.wall else ())
-
-
-def per_realisation_variables(family) -> tuple:
-    """Everything stored per realisation (dimension ``realization``): the family's random
-    parameters and its results. Written chunk by chunk, checksummed, filled, extended."""
-    return parameter_variables(family) + result_variables(family)
-
-
-#: The averaged pulse, computed from the exact fixed-point sums once every chunk is done.
-AVERAGED = (
-    Variable("mean_velocity", ("chain", "granule", "time"), "float64", np.nan, UNITS_V,
-             "ensemble-averaged velocity <v_k(t)> of large granule k over successful realisations"),
-    Variable("mean_velocity_stderr", ("chain", "granule", "time"), "float64", np.nan, UNITS_V, "standard error of <v_k(t)>"),
-    Variable("n_valid", ("chain",), "int64", 0, "1", "successful realisations in mean_velocity"),
-)
-
-#: The aligned pulse (only in ensembles run with ``lags``): <v_k(t_k^peak + tau)> over successful
-#: realisations, each shifted by its own peak time at k (granchain.backends.kernels.aligned).
-ALIGNED = (
-    Variable("aligned_velocity", ("chain", "granule", "lag"), "float64", np.nan, UNITS_V,
-             "aligned pulse <v_k(t_k^peak + tau)>: velocity of large granule k at lag tau after the realisation's own peak there"),
-    Variable("aligned_velocity_stderr", ("chain", "granule", "lag"), "float64", np.nan, UNITS_V,
-             "standard error of the aligned pulse"),
-)
-
-#: Fixed-point sums are integers counting 2^-fixed_point_bits of the rescaled velocity (or its square).
-_FIXED = {"units": "1", "units_description": "integer count of 2^-fixed_point_bits (the store's attribute fixed_point_bits) "
-                                           "rescaled velocity units V_1 (V_1^2 for the sums of squares)"}
-
-#: The ``progress`` group: one storage chunk per run chunk.
-PROGRESS = (
-    Variable("sum_v", ("chunk", "chain", "granule", "time"), "int64", 0, _FIXED,
-             "sum over the chunk's successful realisations of round(v * 2^bits)"),
-    Variable("sum_v2", ("chunk", "chain", "granule", "time"), "int64", 0, _FIXED,
-             "sum over the chunk's successful realisations of round(v^2 * 2^bits)"),
-    Variable("n_valid", ("chunk", "chain"), "int64", 0, "1", "successful realisations of the chunk"),
-    Variable("checksum", ("chunk", "checked"), "int64", 0, "1",
-             "BLAKE2b-64 of the chunk's stored values, per checked variable (written before done)"),
-    Variable("done", ("chunk",), "int8", 0, "1", "1 once every result of the chunk and its checksums are on disk"),
-)
-
-#: The aligned pulse's fixed-point sums per chunk, in the ``progress`` group (with ``lags`` only).
-PROGRESS_ALIGNED = (
-    Variable("sum_a", ("chunk", "chain", "granule", "lag"), "int64", 0, _FIXED,
-             "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau) * 2^bits)"),
-    Variable("sum_a2", ("chunk", "chain", "granule", "lag"), "int64", 0, _FIXED,
-             "sum over the chunk's successful realisations of round(v_k(t_k^peak + tau)^2 * 2^bits)"),
-)
-
-#: The progress variables that hold one run chunk's results (checked like the per-realisation results).
-PROGRESS_SUMS = ("sum_v", "sum_v2", "n_valid")
-
-
-def progress_sums(spec) -> tuple:
-    """Names of the progress variables holding one chunk's results: :data:`PROGRESS_SUMS`, and the
-    aligned pulse's sums with ``lags``."""
-    return PROGRESS_SUMS + (tuple(v.name for v in PROGRESS_ALIGNED) if spec.lags is not None else ())
-
-
-def progress_sum_variables(spec) -> tuple:
-    """The progress variables holding one chunk's results (:func:`progress_sums`), as schema entries."""
-    names = progress_sums(spec)
-    return tuple(v for v in progress_variables(spec) if v.name in names)
-
-
-def chunk_variables(spec) -> tuple:
-    """What one computed chunk holds, each under its schema name: the family's random parameters and the
-    per-realisation results (:func:`per_realisation_variables`, dim ``realization`` = the chunk's
-    realisations) and its progress sums (:func:`progress_sum_variables`, without the ``chunk`` dim).
-    The ensemble runner allocates its compute buffers from the results and the sums."""
-    return per_realisation_variables(spec.family) + progress_sum_variables(spec)
-
-
-def averaged_variables(spec) -> tuple:
-    """The averaged variables of a run: :data:`AVERAGED`, plus :data:`ALIGNED` when it has ``lags``."""
-    return AVERAGED + (ALIGNED if spec.lags is not None else ())
-
-
-def progress_variables(spec) -> tuple:
-    """The ``progress`` group's variables: :data:`PROGRESS`, plus :data:`PROGRESS_ALIGNED` with ``lags``."""
-    return PROGRESS + (PROGRESS_ALIGNED if spec.lags is not None else ())
-
-
-def parameter_variables(family) -> tuple:
-    """The family's random parameters as store variables (dims ``realization`` + the parameter's)."""
-    fills = {"f": np.nan, "i": -1, "u": 0, "b": False}
-    return tuple(Variable(p.name, ("realization",) + tuple(p.dims), p.dtype, fills[np.dtype(p.dtype).kind],
-                          rescaled_attrs(p.units) if p.units in RESCALED else p.units, p.long_name)
-                 for p in family.parameters())
-
-
-def sizes(spec) -> dict:
-    """The size of every dimension of a run's store, by name."""
-    return {"chain": len(spec.chains), "realization": spec.realizations, "time": spec.t_grid.size, "chunk": spec.n_chunks,
-            "checked": len(checked_variables(spec)), "contact": spec.family.n_contacts,
-            **spec.family.dim_sizes(), **({"lag": spec.lags.size} if spec.lags is not None else {})}
-
-
-def checked_variables(spec) -> list[str]:
-    """Every variable whose chunk values are checksummed: the family's parameters and results
-    (:func:`per_realisation_variables`, read from the schema, so new results are checked
-    automatically) and the progress sums."""
-    return [v.name for v in per_realisation_variables(spec.family)] + [f"progress/{name}" for name in progress_sums(spec)]
-
-
-def digest(values, dtype) -> int:
-    """BLAKE2b-64 (as a signed int64) of the values as stored (dtype, C order)."""
-    a = np.ascontiguousarray(values, dtype=np.dtype(dtype))
-    return int.from_bytes(hashlib.blake2b(a.tobytes(), digest_size=8).digest(), "little", signed=True)
-
+__all__ = ["MemorySink", "ZarrSink", "StoreRepairWarning", "stored_record", "current_record", "check_same_parameters",
+           "integrators_as_run", "ALIGNED", "AVERAGED", "FORCES", "PROGRESS", "PROGRESS_ALIGNED", "PROGRESS_SUMS", "RESULTS", "WALL", "Variable", "averaged_variables", "checked_variables", "chunk_variables", "digest", "parameter_variables", "per_realisation_variables", "progress_sum_variables", "progress_sums", "progress_variables", "result_variables", "sizes"]
 
 def integrators_as_run(spec) -> dict:
     """{chain kind: the record of its integrator as it runs on the family's chains}
@@ -901,6 +734,8 @@ def stored_record(ds, key: str = "family") -> dict | None:
     meaning). ``ds``: a Dataset (``run_ensemble``'s result, a store opened by any reader) or the path of
     a store (:func:`open_store`). None where the Dataset holds no such record."""
     if isinstance(ds, (str, os.PathLike)):
+        from .read import open_store
+
         ds = open_store(ds)
     params = ds.attrs.get("granchain_parameters")
     record = current_record(json.loads(params)) if params is not None else {}
@@ -913,168 +748,3 @@ def stored_record(ds, key: str = "family") -> dict | None:
         return _current_family_record(stored) if key == "family" else stored
     found = record.get(key)  # records of granchain 0.1.0 have neither attribute: its parameters name both
     return found if isinstance(found, dict) else None
-
-
-# ---------------------------------------------------------------------- reading a store
-#: Root attributes that say where and when a store was written (kept as stored by :func:`open_store`);
-#: every other attribute granchain writes follows from the parameter record and is given in today's form.
-_PROVENANCE = ("created", "history", "granchain_version", "numpy_version", "scipy_version", "numba_version", "source")
-
-_WHAT_TO_GIVE = ("give the path of an ensemble store written by `granchain ensemble --out PATH` or "
-                 "granchain.run_ensemble(..., out=PATH), or a netCDF file written by `granchain export`")
-
-
-def open_store(path, *, group: str | None = None, load: bool = False):
-    """An ensemble store as an ``xarray.Dataset``, read in the form this version writes.
-
-    Every granchain reader (the analysis, the figures, ``granchain info``, ``export``, ``theory``, the
-    jackknife over chunks) opens stores with it. Nothing is written: a store of an earlier version is
-    brought up to date in the returned Dataset only (resuming it with :func:`granchain.run_ensemble`
-    rewrites its metadata on disk). ``xarray.open_dataset(path, engine="zarr")`` still opens a store
-    without granchain, as stored.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A Zarr store (format 2) written by :func:`granchain.run_ensemble` (``out=``) or ``granchain
-        ensemble --out``, finished or not, or a netCDF file written by ``granchain export``.
-    group : None or "progress"
-        None: the results. ``"progress"``: the per-chunk fixed-point sums, checksums and done flags
-        (Zarr stores only).
-    load : bool
-        False: lazy (Dask arrays, read when used). True: every value read into memory.
-
-    Returns
-    -------
-    xarray.Dataset
-        The stored values, unchanged. The records (attributes ``granchain_parameters``,
-        ``granchain_family``, ``granchain_integrator``) are in today's form (the compatibility layer
-        ``granchain.ensembles.store.current_record`` that a resume compares records with:
-        ``results_version`` instead of the package version, earlier meanings of family fields
-        translated, and for a store of granchain 0.1.0 its family and integrator as records); the other
-        attributes granchain writes and the variables' metadata (units, long_name, flags) are those a
-        store of the same parameters gets today, except where and when it was written (``created``,
-        ``history``, the versions), kept as stored, as is any attribute granchain does not write (the
-        ``physical_*`` scale of ``granchain ensemble --material``). The integers an exported netCDF
-        file holds in 32 bits are read back in the store's dtypes.
-
-    Raises
-    ------
-    ValueError
-        For a path that is not a granchain store (it says what to give instead), a store whose
-        metadata cannot be read (``granchain info PATH`` says what is damaged), or another group.
-    """
-    import xarray as xr
-
-    if group not in (None, "progress"):
-        raise ValueError(f"group must be None (the results) or 'progress' (the per-chunk sums and done flags), got {group!r}")
-    try:
-        text = os.fsdecode(os.fspath(path))
-    except TypeError:
-        raise ValueError(f"path must be a str or os.PathLike naming a store, got {path!r}") from None
-    if os.path.isdir(text):
-        params = stored_parameters(text)
-        if params is None:
-            raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters record in "
-                             f"{os.path.join(text, '.zattrs')} or {os.path.join(text, 'progress', '.zattrs')}): {_WHAT_TO_GIVE}")
-        opener = lambda: xr.open_zarr(text, group=group, consolidated=False, zarr_format=2)  # noqa: E731
-    elif os.path.isfile(text):
-        with open(text, "rb") as f:
-            magic = f.read(8)
-        if not (magic.startswith(b"CDF") or magic == b"\x89HDF\r\n\x1a\n"):
-            raise ValueError(f"{text} is neither a Zarr store (a directory) nor a netCDF file: {_WHAT_TO_GIVE}")
-        if group is not None:
-            raise ValueError(f"{text} is a netCDF export, which holds the results only: open the Zarr store it was "
-                             f"exported from for the {group!r} group")
-        params = None
-        opener = lambda: xr.open_dataset(text)  # noqa: E731 -- the netCDF engine that reads the file
-    else:
-        raise ValueError(f"{text} does not exist: {_WHAT_TO_GIVE}")
-    try:
-        ds = opener()
-    except Exception as exc:  # noqa: BLE001 -- damaged metadata, a missing netCDF engine: said with what to do
-        raise ValueError(_unreadable(text, exc)) from None
-    try:
-        params = ds.attrs.get("granchain_parameters", params)
-        if not isinstance(params, str):
-            raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters attribute): {_WHAT_TO_GIVE}")
-        if load:
-            try:
-                ds.load()
-            except Exception as exc:  # noqa: BLE001 -- a truncated or garbled chunk
-                raise ValueError(_unreadable(text, exc)) from None
-        result = _todays_form(ds, group, params)
-    except BaseException:
-        ds.close()
-        raise
-    if load:
-        ds.close()  # the values are in memory: no file stays open
-    return result
-
-
-def _unreadable(path: str, exc: BaseException) -> str:
-    hint = (" (reading netCDF needs the netCDF4 package: pip install 'granchain[netcdf]')"
-            if os.path.isfile(path) and "engine" in str(exc) else "")
-    return (f"{path} could not be read ({_short(exc)}){hint}; `granchain info {path}` says what is damaged, and running "
-            "the ensemble command again (same arguments) repairs it")
-
-
-def _todays_form(ds, group, params: str):
-    """``ds`` (just opened, ours to change) with its records and metadata in today's form (see :func:`open_store`)."""
-    try:
-        record = current_record(json.loads(params))
-    except ValueError:
-        raise ValueError("the store's parameter record is not valid JSON: run the ensemble command again (same "
-                         "arguments) to restore it from the other copy, or `granchain info` on the store") from None
-    if group == "progress":
-        _set_metadata(ds, {v.name: v.metadata() for v in PROGRESS + PROGRESS_ALIGNED} | {"checked": _CHECKED_ATTRS})
-        ds.attrs.update(granchain_parameters=json.dumps(record, sort_keys=True), about=_PROGRESS_ABOUT)
-        return ds
-    records = {"granchain_parameters": json.dumps(record, sort_keys=True)}
-    for key, name in (("family", "granchain_family"), ("integrator", "granchain_integrator")):
-        if isinstance(record.get(key), dict):
-            records[name] = json.dumps(record[key], sort_keys=True)
-    spec = _spec_of(record, ds)
-    if spec is None:  # a CustomFamily (its function is not stored): the records and the results' metadata
-        _set_metadata(ds, {v.name: v.metadata() for v in RESULTS + FORCES + WALL + AVERAGED + ALIGNED})
-        ds.attrs.update(records)
-        return ds
-    reference = empty_dataset(spec, lazy=True)
-    for name, ref in reference.variables.items():  # a netCDF export's 32-bit integers, back in the store's dtypes
-        if name in ds.variables and ds[name].dtype != ref.dtype and ds[name].dtype.kind in "iu" and ref.dtype.kind in "iu":
-            cast = ds[name].astype(ref.dtype)
-            ds = ds.assign_coords({name: cast}) if name in ds.coords else ds.assign({name: cast})
-    _set_metadata(ds, {name: ref.attrs for name, ref in reference.variables.items()})
-    # Attributes a store of these parameters gets today; where and when it was written as stored, and any
-    # attribute granchain does not write itself (the physical scale of `granchain ensemble --material`, a user's) kept.
-    ds.attrs = {**ds.attrs, **reference.attrs, **records, **{k: ds.attrs[k] for k in _PROVENANCE if k in ds.attrs}}
-    return ds
-
-
-def _set_metadata(ds, attrs: dict) -> None:
-    for name, value in attrs.items():
-        if name in ds.variables:
-            ds.variables[name].attrs = dict(value)
-
-
-def _spec_of(record: dict, ds):
-    """The run a store's record (today's form) describes, on the store's own time and lag grids; None where
-    it cannot be rebuilt (a CustomFamily, whose function is not stored, or an incomplete record)."""
-    import warnings
-
-    from ..families import family_from_record
-    from ..solve.integrators import RunControls, integrator_from_record
-    from .run import EnsembleSpec
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # warned about when the ensemble was made
-            per_chain = record.get("chain_integrators")
-            return EnsembleSpec(
-                family_from_record(record["family"]), record["realizations"], record["seed"], tuple(record["chains"]),
-                None if per_chain else integrator_from_record(record["integrator"]), np.asarray(ds["time"].values),
-                record["chunk_size"], RunControls(record["exit_margin"], record["max_steps"], record["peak_rtol"]),
-                np.asarray(ds["lag"].values) if "lag" in ds.coords else None,
-                chain_integrators={k: integrator_from_record(r) for k, r in per_chain.items()} if per_chain else None)
-    except (KeyError, TypeError, ValueError):
-        return None

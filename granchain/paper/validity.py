@@ -188,7 +188,7 @@ def compare_paired(ds, progress) -> dict:
 def _run_point(dist, N: int, realizations: int, seed: int, blocks: int, path, integrator, progress: bool) -> dict:
     """Run (or resume) one paired ensemble into ``path`` and measure it."""
     from ..ensembles.run import run_ensemble
-    from ..ensembles.store import open_store
+    from ..ensembles.read import open_store
     from ..families import RandomDecorated
 
     chunk = -(-realizations // blocks)

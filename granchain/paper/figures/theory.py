@@ -56,7 +56,7 @@ def _measured(measured, distribution, n_large):
                     ("mean_peak_velocity", "averaged_peak_velocity", "arrival_time_std")} | {"source": f"granchain ensemble{size}"}
         return None
     if isinstance(measured, (str, Path)):
-        from ...ensembles.store import open_store
+        from ...ensembles.read import open_store
 
         return _from_dataset(open_store(measured), f"store {Path(measured).name}")
     return _from_dataset(measured, "ensemble")

@@ -1,0 +1,187 @@
+"""Reading a store: :func:`open_store`, which every granchain reader uses (the analysis, the figures,
+``granchain info``, ``export``, ``theory``, the jackknife over chunks), with the records and metadata in
+the form this version writes (the schema, :mod:`~granchain.ensembles.schema`, and the compatibility
+layer of :mod:`~granchain.ensembles.store`), writing nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+
+from .schema import ALIGNED, AVERAGED, FORCES, PROGRESS, PROGRESS_ALIGNED, RESULTS, WALL
+from .store import (
+    _CHECKED_ATTRS,
+    _PROGRESS_ABOUT,
+    _short,
+    current_record,
+    empty_dataset,
+    stored_parameters,
+)
+
+__all__ = ["open_store"]
+
+#: Root attributes that say where and when a store was written (kept as stored by :func:`open_store`);
+#: every other attribute granchain writes follows from the parameter record and is given in today's form.
+_PROVENANCE = ("created", "history", "granchain_version", "numpy_version", "scipy_version", "numba_version", "source")
+
+_WHAT_TO_GIVE = ("give the path of an ensemble store written by `granchain ensemble --out PATH` or "
+                 "granchain.run_ensemble(..., out=PATH), or a netCDF file written by `granchain export`")
+
+
+def open_store(path, *, group: str | None = None, load: bool = False):
+    """An ensemble store as an ``xarray.Dataset``, read in the form this version writes.
+
+    Every granchain reader (the analysis, the figures, ``granchain info``, ``export``, ``theory``, the
+    jackknife over chunks) opens stores with it. Nothing is written: a store of an earlier version is
+    brought up to date in the returned Dataset only (resuming it with :func:`granchain.run_ensemble`
+    rewrites its metadata on disk). ``xarray.open_dataset(path, engine="zarr")`` still opens a store
+    without granchain, as stored.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A Zarr store (format 2) written by :func:`granchain.run_ensemble` (``out=``) or ``granchain
+        ensemble --out``, finished or not, or a netCDF file written by ``granchain export``.
+    group : None or "progress"
+        None: the results. ``"progress"``: the per-chunk fixed-point sums, checksums and done flags
+        (Zarr stores only).
+    load : bool
+        False: lazy (Dask arrays, read when used). True: every value read into memory.
+
+    Returns
+    -------
+    xarray.Dataset
+        The stored values, unchanged. The records (attributes ``granchain_parameters``,
+        ``granchain_family``, ``granchain_integrator``) are in today's form (the compatibility layer
+        ``granchain.ensembles.store.current_record`` that a resume compares records with:
+        ``results_version`` instead of the package version, earlier meanings of family fields
+        translated, and for a store of granchain 0.1.0 its family and integrator as records); the other
+        attributes granchain writes and the variables' metadata (units, long_name, flags) are those a
+        store of the same parameters gets today, except where and when it was written (``created``,
+        ``history``, the versions), kept as stored, as is any attribute granchain does not write (the
+        ``physical_*`` scale of ``granchain ensemble --material``). The integers an exported netCDF
+        file holds in 32 bits are read back in the store's dtypes.
+
+    Raises
+    ------
+    ValueError
+        For a path that is not a granchain store (it says what to give instead), a store whose
+        metadata cannot be read (``granchain info PATH`` says what is damaged), or another group.
+    """
+    import xarray as xr
+
+    if group not in (None, "progress"):
+        raise ValueError(f"group must be None (the results) or 'progress' (the per-chunk sums and done flags), got {group!r}")
+    try:
+        text = os.fsdecode(os.fspath(path))
+    except TypeError:
+        raise ValueError(f"path must be a str or os.PathLike naming a store, got {path!r}") from None
+    if os.path.isdir(text):
+        params = stored_parameters(text)
+        if params is None:
+            raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters record in "
+                             f"{os.path.join(text, '.zattrs')} or {os.path.join(text, 'progress', '.zattrs')}): {_WHAT_TO_GIVE}")
+        opener = lambda: xr.open_zarr(text, group=group, consolidated=False, zarr_format=2)  # noqa: E731
+    elif os.path.isfile(text):
+        with open(text, "rb") as f:
+            magic = f.read(8)
+        if not (magic.startswith(b"CDF") or magic == b"\x89HDF\r\n\x1a\n"):
+            raise ValueError(f"{text} is neither a Zarr store (a directory) nor a netCDF file: {_WHAT_TO_GIVE}")
+        if group is not None:
+            raise ValueError(f"{text} is a netCDF export, which holds the results only: open the Zarr store it was "
+                             f"exported from for the {group!r} group")
+        params = None
+        opener = lambda: xr.open_dataset(text)  # noqa: E731 -- the netCDF engine that reads the file
+    else:
+        raise ValueError(f"{text} does not exist: {_WHAT_TO_GIVE}")
+    try:
+        ds = opener()
+    except Exception as exc:  # noqa: BLE001 -- damaged metadata, a missing netCDF engine: said with what to do
+        raise ValueError(_unreadable(text, exc)) from None
+    try:
+        params = ds.attrs.get("granchain_parameters", params)
+        if not isinstance(params, str):
+            raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters attribute): {_WHAT_TO_GIVE}")
+        if load:
+            try:
+                ds.load()
+            except Exception as exc:  # noqa: BLE001 -- a truncated or garbled chunk
+                raise ValueError(_unreadable(text, exc)) from None
+        result = _todays_form(ds, group, params)
+    except BaseException:
+        ds.close()
+        raise
+    if load:
+        ds.close()  # the values are in memory: no file stays open
+    return result
+
+
+def _unreadable(path: str, exc: BaseException) -> str:
+    hint = (" (reading netCDF needs the netCDF4 package: pip install 'granchain[netcdf]')"
+            if os.path.isfile(path) and "engine" in str(exc) else "")
+    return (f"{path} could not be read ({_short(exc)}){hint}; `granchain info {path}` says what is damaged, and running "
+            "the ensemble command again (same arguments) repairs it")
+
+
+def _todays_form(ds, group, params: str):
+    """``ds`` (just opened, ours to change) with its records and metadata in today's form (see :func:`open_store`)."""
+    try:
+        record = current_record(json.loads(params))
+    except ValueError:
+        raise ValueError("the store's parameter record is not valid JSON: run the ensemble command again (same "
+                         "arguments) to restore it from the other copy, or `granchain info` on the store") from None
+    if group == "progress":
+        _set_metadata(ds, {v.name: v.metadata() for v in PROGRESS + PROGRESS_ALIGNED} | {"checked": _CHECKED_ATTRS})
+        ds.attrs.update(granchain_parameters=json.dumps(record, sort_keys=True), about=_PROGRESS_ABOUT)
+        return ds
+    records = {"granchain_parameters": json.dumps(record, sort_keys=True)}
+    for key, name in (("family", "granchain_family"), ("integrator", "granchain_integrator")):
+        if isinstance(record.get(key), dict):
+            records[name] = json.dumps(record[key], sort_keys=True)
+    spec = _spec_of(record, ds)
+    if spec is None:  # a CustomFamily (its function is not stored): the records and the results' metadata
+        _set_metadata(ds, {v.name: v.metadata() for v in RESULTS + FORCES + WALL + AVERAGED + ALIGNED})
+        ds.attrs.update(records)
+        return ds
+    reference = empty_dataset(spec, lazy=True)
+    for name, ref in reference.variables.items():  # a netCDF export's 32-bit integers, back in the store's dtypes
+        if name in ds.variables and ds[name].dtype != ref.dtype and ds[name].dtype.kind in "iu" and ref.dtype.kind in "iu":
+            cast = ds[name].astype(ref.dtype)
+            ds = ds.assign_coords({name: cast}) if name in ds.coords else ds.assign({name: cast})
+    _set_metadata(ds, {name: ref.attrs for name, ref in reference.variables.items()})
+    # Attributes a store of these parameters gets today; where and when it was written as stored, and any
+    # attribute granchain does not write itself (the physical scale of `granchain ensemble --material`, a user's) kept.
+    ds.attrs = {**ds.attrs, **reference.attrs, **records, **{k: ds.attrs[k] for k in _PROVENANCE if k in ds.attrs}}
+    return ds
+
+
+def _set_metadata(ds, attrs: dict) -> None:
+    for name, value in attrs.items():
+        if name in ds.variables:
+            ds.variables[name].attrs = dict(value)
+
+
+def _spec_of(record: dict, ds):
+    """The run a store's record (today's form) describes, on the store's own time and lag grids; None where
+    it cannot be rebuilt (a CustomFamily, whose function is not stored, or an incomplete record)."""
+    import warnings
+
+    from ..families import family_from_record
+    from ..solve.integrators import RunControls, integrator_from_record
+    from .run import EnsembleSpec
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # warned about when the ensemble was made
+            per_chain = record.get("chain_integrators")
+            return EnsembleSpec(
+                family_from_record(record["family"]), record["realizations"], record["seed"], tuple(record["chains"]),
+                None if per_chain else integrator_from_record(record["integrator"]), np.asarray(ds["time"].values),
+                record["chunk_size"], RunControls(record["exit_margin"], record["max_steps"], record["peak_rtol"]),
+                np.asarray(ds["lag"].values) if "lag" in ds.coords else None,
+                chain_integrators={k: integrator_from_record(r) for k, r in per_chain.items()} if per_chain else None)
+    except (KeyError, TypeError, ValueError):
+        return None
