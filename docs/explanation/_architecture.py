@@ -50,8 +50,8 @@ BOXES = {
               "integrators: values with capabilities\n(DP5, RKN4, Verlet, DOP853; INTEGRATORS)\n"
               "simulate(chain) -> PulseResult"),
     "kernels": (1.4, 2.0, 5.2, 1.6, CORE, False, "granchain.backends.kernels (Numba)",
-                "records (Params, Model, Method, Run, ...), forces,\nwindow, stop, peaks, dense, onstep, rkloop, dp5,\n"
-                "rkn4, verlet, dispatch, batch, aligned, memory, jit"),
+                "records (Params, Model, Method, Run, ...), forces,\nwindow, stop, peaks, dense, rkloop, dp5, rkn4,\n"
+                "verlet, dispatch, batch, aligned, memory, jit"),
     "units": (8.6, 2.0, 4.9, 1.6, UNITS, False, "granchain.units",
               "physical units (paper Sec. II\nrescaling): the units attributes\nof every result"),
     "model": (0.4, 0.2, 15.2, 1.3, CORE, False, "granchain.model",

@@ -10,8 +10,7 @@ it validates, allocates, fills the records and calls :func:`dispatch.integrate_c
 - ``window``: the active window ahead of the pulse and the trailing window behind it;
 - ``stop``: when the pulse has left (free end) or come back (wall);
 - ``peaks``: peak records, the state at t = 0, the ``info`` record;
-- ``dense``: dense output of the Runge-Kutta steps and the roots found on it; ``onstep``: what an
-  accepted step records on it (velocity and force maxima, grid samples);
+- ``dense``: dense output of the Runge-Kutta steps and the roots found on it;
 - ``rkloop``: the adaptive Runge-Kutta step loop; ``dp5`` and ``rkn4``: the tableaux it runs;
 - ``verlet``: velocity Verlet;
 - ``dispatch``: the single-chain entry point; ``batch``: the parallel ensemble driver;

@@ -16,7 +16,6 @@ import math
 
 from numba import njit
 
-from .forces import add_potential
 from .jit import JIT, JIT_INLINE
 
 WINDOW_MARGIN = 5
@@ -60,22 +59,3 @@ def is_finite_window(x, v, hi):
         if not (math.isfinite(x[k]) and math.isfinite(v[k])):
             return False
     return True
-
-
-@njit(**JIT_INLINE)
-def leave_window(X, C, n, Kx, Kv, lo, new_lo, t, t_frozen, frozen_potential):
-    """Granules lo..new_lo-1 leave the integration at time ``t`` (a trailing-window cut across the
-    open contact new_lo-1, :func:`open_contact_behind`): their exit times go to ``t_frozen``, the
-    stage slots ``Kx``, ``Kv`` (window-local, indexed from lo) shift to start at new_lo over the
-    whole padded width (zeros follow the window), and the potential energy of the contacts among
-    them (``X``, ``C``: positions and stiffnesses from granule lo on, exponent ``n``) is added to
-    ``frozen_potential``, which is returned: the energy report counts it (``forces.final_energy``)."""
-    d = new_lo - lo
-    frozen_potential = add_potential(frozen_potential, X, C, n, 0, d - 1)
-    for i in range(d):
-        t_frozen[lo + i] = t
-    for s in range(Kx.shape[0]):
-        for i in range(Kx.shape[1] - new_lo):
-            Kx[s, i] = Kx[s, i + d]
-            Kv[s, i] = Kv[s, i + d]
-    return frozen_potential
