@@ -89,3 +89,25 @@ def in_order(b):
     1e-10 and 1e-12 put that peak 3.7e-5 and 2.8e-5 apart (relative). (The ensembles' report counts
     these out-of-order peaks.)"""
     return np.r_[b.peak_time[:-1] <= b.peak_time[1:], True]
+
+
+def _v040_decorated():
+    import granchain as gc
+
+    return gc.RandomDecorated(6, gc.Uniform(0.01, 0.4))
+
+
+def _v040_tapered_wall():
+    import granchain as gc
+
+    return gc.TaperedDecorated(5, q=0.1, distribution=gc.Uniform(0.05, 0.35), wall=True)  # 0.4's ratio 0.9
+
+
+#: The stores granchain 0.4.0 wrote (tests/data/make_v0.4.0_fixtures.py) and how today's API makes the
+#: same runs: {store name: (family factory, run_ensemble keywords)}.
+FIXTURE_GRID = np.round(np.arange(0.0, 30.05, 0.5), 12)
+FIXTURES_040 = {
+    "v0.4.0-decorated-N6.zarr": (_v040_decorated, dict(realizations=24, seed=7, chunk_size=8, t_grid=FIXTURE_GRID)),
+    "v0.4.0-tapered-wall-N5.zarr": (_v040_tapered_wall, dict(realizations=12, seed=3, chunk_size=4, t_grid=FIXTURE_GRID,
+                                                             lags=np.round(np.arange(-4.0, 4.05, 0.5), 12))),
+}

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 import scipy.stats as st
 import xarray as xr
+from conftest import FIXTURE_GRID, FIXTURES_040
 
 import granchain as gc
 from granchain.ensembles import read, schema, store
@@ -30,7 +31,7 @@ from granchain.ensembles import run as ens
 
 DATA = Path(__file__).parent / "data"
 PACKAGE = Path(gc.__file__).parent
-GRID = np.round(np.arange(0.0, 30.05, 0.5), 12)
+GRID = FIXTURE_GRID
 FAMILY = gc.RandomDecorated(4)
 RUN = dict(realizations=6, seed=1, chunk_size=3)
 
@@ -78,13 +79,6 @@ def test_a_fresh_store_opens_as_stored(fresh, load):
     assert tree_digest(fresh) == before  # nothing written
 
 
-FIXTURES_040 = {
-    "v0.4.0-decorated-N6.zarr": (lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.4)),
-                                 dict(realizations=24, seed=7, chunk_size=8, t_grid=GRID)),
-    "v0.4.0-tapered-wall-N5.zarr": (lambda: gc.TaperedDecorated(5, q=0.1, distribution=gc.Uniform(0.05, 0.35), wall=True),
-                                    dict(realizations=12, seed=3, chunk_size=4, t_grid=GRID,
-                                         lags=np.round(np.arange(-4.0, 4.05, 0.5), 12))),
-}
 
 
 @pytest.mark.parametrize("name", sorted(FIXTURES_040))

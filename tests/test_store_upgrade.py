@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import FIXTURE_GRID, FIXTURES_040
 
 import granchain as gc
 from granchain._version import RESULTS_VERSION
@@ -23,14 +24,8 @@ from granchain.ensembles.store import (
 )
 
 DATA = Path(__file__).parent / "data"
-GRID = np.round(np.arange(0.0, 30.05, 0.5), 12)
-FIXTURES = {
-    "v0.4.0-decorated-N6.zarr": (lambda: gc.RandomDecorated(6, gc.Uniform(0.01, 0.4)),
-                                 dict(realizations=24, seed=7, chunk_size=8, t_grid=GRID)),
-    "v0.4.0-tapered-wall-N5.zarr": (lambda: gc.TaperedDecorated(5, q=0.1, distribution=gc.Uniform(0.05, 0.35), wall=True),
-                                    dict(realizations=12, seed=3, chunk_size=4, t_grid=GRID,
-                                         lags=np.round(np.arange(-4.0, 4.05, 0.5), 12))),
-}
+GRID = FIXTURE_GRID
+FIXTURES = FIXTURES_040
 #: Every result a store holds (per realisation and averaged); metadata are allowed to change.
 RESULTS = ("peak_velocity", "peak_time", "status", "energy_error", "n_steps", "t_end", "peak_force", "peak_force_time",
            "peak_wall_force", "peak_wall_force_time", "small_radius", "mean_velocity", "mean_velocity_stderr", "n_valid",
