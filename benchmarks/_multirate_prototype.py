@@ -27,12 +27,21 @@ import numpy as np
 from numba import njit
 
 from granchain.backends.kernels import rkn4 as _rkn
-from granchain.backends.kernels.forces import POW_HERTZ, acceleration_of, accelerations, contact_force
+from granchain.backends.kernels.forces import POW_HERTZ, accelerations, contact_force
 from granchain.backends.kernels.records import Forces, Params
 from granchain.backends.kernels.rkloop import ALPHA_RKN4 as ALPHA
 from granchain.backends.kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY
 
 N = 2.5  # Hertz contacts, Eq. (motion_rescaled)
+#: The kernels' model record of an elastic, unloaded Hertz chain without a wall (records.Params).
+HERTZ_PARAMS = Params(N, POW_HERTZ, False, 0.0, 0.0)
+
+
+@njit(cache=True)
+def _forces(c, inv_m):
+    """The kernels' force record of an elastic, unloaded chain (no static overlaps or forces)."""
+    zeros = np.zeros(c.shape[0])
+    return Forces(c, inv_m, HERTZ_PARAMS, zeros, zeros)
 
 
 @njit(cache=True)
@@ -49,8 +58,11 @@ def _rejected_factor(err):
 @njit(cache=True)
 def _local_accelerations(x, c, inv_m, a, lo, hi):
     """a[lo..hi-1] (their contacts only)."""
-    for k in range(max(lo, 0), min(hi, x.shape[0])):
-        a[k] = acceleration_of(x, k, Forces(c, inv_m, Params(N, POW_HERTZ, False)))
+    M = x.shape[0]
+    for k in range(max(lo, 0), min(hi, M)):
+        left = contact_force(x[k - 1] - x[k], c[k - 1], HERTZ_PARAMS) if k > 0 else 0.0
+        right = contact_force(x[k] - x[k + 1], c[k], HERTZ_PARAMS) if k < M - 1 else 0.0
+        a[k] = (left - right) * inv_m[k]
 
 
 @njit(cache=True)
@@ -74,7 +86,7 @@ def _poly(q, th):
 @njit(cache=True)
 def _fast_forces(y, th, ql, qr, cl, cr):
     """(force of the left contact on the fast granule, force of the right contact on the right neighbour)."""
-    return contact_force(_poly(ql, th) - y, cl, Params(N, POW_HERTZ, False)), contact_force(y - _poly(qr, th), cr, Params(N, POW_HERTZ, False))
+    return contact_force(_poly(ql, th) - y, cl, HERTZ_PARAMS), contact_force(y - _poly(qr, th), cr, HERTZ_PARAMS)
 
 
 @njit(cache=True)
@@ -160,7 +172,8 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
     push_v = np.zeros(M)
     vprev = np.zeros(n_obs)
     peaked = np.zeros(n_obs, np.bool_)
-    accelerations(x, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, a)
+    fm = _forces(cm, im)
+    accelerations(x, v, fm, M, F, a)
     front = -1
     relaxed = 0
     for q in range(n_obs):
@@ -180,13 +193,13 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
         h2 = h * h
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C1 * v[i]) + h2 * (_rkn.A10 * a[i])
-        accelerations(xs, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, f1)
+        accelerations(xs, v, fm, M, F, f1)
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C2 * v[i]) + h2 * (_rkn.A20 * a[i] + _rkn.A21 * f1[i])
-        accelerations(xs, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, f2)
+        accelerations(xs, v, fm, M, F, f2)
         for i in range(M):
             xs[i] = x[i] + h * v[i] + h2 * (_rkn.B0 * a[i] + _rkn.B1 * f1[i] + _rkn.B2 * f2[i])
-        accelerations(xs, Forces(cm, im, Params(N, POW_HERTZ, False)), M, F, f3)
+        accelerations(xs, v, fm, M, F, f3)
         err = 0.0
         for i in range(M):
             vs[i] = v[i] + h * (_rkn.P0 * a[i] + _rkn.P1 * f1[i] + _rkn.P2 * f2[i] + _rkn.P3 * f3[i])

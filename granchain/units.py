@@ -340,6 +340,22 @@ class Scale:
             raise ValueError(f"unknown quantity {kind!r}; choose one of {', '.join(QUANTITIES)}")
         return value * getattr(self, kind)
 
+    def to_rescaled(self, value, kind: str) -> float:
+        """A physical ``value`` (a number in the SI unit of ``kind``, a ``pint.Quantity`` or a string such
+        as ``"2 N"``, ``"5 g"``, ``"1 m/s"``, ``"2 us"``) in the paper's rescaled units: what a static
+        force, a striker's mass or a damping time is in the units the chains are integrated in
+        (``scale.to_rescaled("2 N", "force")``). The inverse of :meth:`to_si`."""
+        if kind not in SI_UNITS:
+            raise ValueError(f"unknown quantity {kind!r}; choose one of {', '.join(QUANTITIES)}")
+        word = {"velocity": "speed", "radius": "length"}.get(kind, kind)
+        return si_value(value, word, f"a {kind}") / getattr(self, kind)
+
+    def wave_speed(self, granules_per_time: float, spacing: float = 2.0) -> float:
+        """A speed in granules per unit time (``PulseResult.wave_speed``) in m/s: ``spacing`` is the
+        distance between neighbouring granules' centres in units of the reference radius (2 for a
+        monodisperse chain of the reference granules; the static overlaps, ~1e-4 of it, are neglected)."""
+        return granules_per_time * spacing * self.radius / self.time
+
     def to_quantity(self, value, kind: str):
         """``value`` (rescaled, scalar or array) as a ``pint.Quantity`` in the SI unit of ``kind``:
         ``scale.to_quantity(result.peak_time, "time").to("us")``."""

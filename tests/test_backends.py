@@ -416,11 +416,11 @@ MODEL_FIELD_SCRIPT = textwrap.dedent(
     seen = []
 
     # Observe the model's parameters where the step loops hand them on (rkloop._rk_loop and
-    # verlet.verlet_integrate call peaks.initial_force_records(x, model, g, out)).
+    # verlet.verlet_integrate call peaks.initial_force_records(x, model, g, out, contacts)).
     def observed(original):
-        def initial_force_records(x, model, g, out):
+        def initial_force_records(x, model, g, out, contacts):
             seen.append(getattr(model.params, "probe", "absent"))
-            return original(x, model, g, out)
+            return original(x, model, g, out, contacts)
         return initial_force_records
 
     rkloop.initial_force_records = observed(peaks.initial_force_records)
@@ -461,7 +461,8 @@ MODEL_FIELD_SCRIPT = textwrap.dedent(
             patched.append(module.__name__)
     # ... and the one place that fills it.
     def model_params(chain):
-        return New(float(chain.n), power_code(chain.n), chain.boundary.wall, PROBE)
+        return New(float(chain.n), power_code(chain.n), chain.boundary.wall, float(chain.contact.gamma),
+                   float(chain.static_force), PROBE)
     numba_backend.model_params = model_params
 
     extended = {name: run(i) for name, i in INTEGRATORS.items()}
@@ -515,7 +516,7 @@ def test_a_new_model_field_reaches_the_step_loop_untouched(model_field_run, inte
     """
     plain = model_field_run["plain"][integ_name]
     run = model_field_run["extended"][integ_name]
-    assert run["error"] is None, f"{integ_name}: a 4-field Params does not reach the kernel: {run['error']}"
+    assert run["error"] is None, f"{integ_name}: a Params with one more field does not reach the kernel: {run['error']}"
     assert run["seen"] and all(s == model_field_run["probe"] for s in run["seen"]), (
         f"{integ_name}: the step loop saw {run['seen']} instead of the new field's value {model_field_run['probe']}")
     for key in set(plain) - {"error", "seen"}:
@@ -550,10 +551,10 @@ def test_a_new_params_field_compiles_and_reaches_the_forces(tmp_path):
     shutil.copytree(Path(gc.__file__).parent, root / "granchain", ignore=shutil.ignore_patterns("__pycache__"))
     kernels = root / "granchain" / "backends"
     edits = {
-        kernels / "kernels" / "records.py": [('Params = namedtuple("Params", ["n", "power", "wall"])',
-                                              'Params = namedtuple("Params", ["n", "power", "wall", "stiffening"])')],
-        kernels / "numba_backend.py": [("return Params(float(chain.n), power_code(chain.n), chain.boundary.wall)",
-                                        "return Params(float(chain.n), power_code(chain.n), chain.boundary.wall, 2.0)")],
+        kernels / "kernels" / "records.py": [('Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force"])',
+                                              'Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force", '
+                                              '"stiffening"])')],
+        kernels / "numba_backend.py": [("float(chain.static_force))", "float(chain.static_force), 2.0)")],
         kernels / "kernels" / "forces.py": [("return c * d * math.sqrt(d)", "return p.stiffening * c * d * math.sqrt(d)"),
                                             ("F[j + 1] = c[j] * d * math.sqrt(d)",
                                              "F[j + 1] = p.stiffening * c[j] * d * math.sqrt(d)")],

@@ -70,15 +70,14 @@ class Backend:
             raise ValueError(f"the {self.name} backend has no code for the contact law {chain.contact!r}; it runs "
                              f"{', '.join(law.__name__ for law in self.contact_laws)}")
 
-    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls):
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state); returns
-        (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f) (see ``Integrator.integrate``)."""
+        (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c) (see ``Integrator.integrate``)."""
         raise NotImplementedError
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls, scale: float, out: dict) -> None:
+                        controls, scale: float, out: dict, model: dict | None = None) -> None:
         """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time."""
-        from ..model.chain import Chain
         from .kernels.aligned import accumulate_aligned
         from .kernels.batch import (
             accumulate_fixed_point,
@@ -86,21 +85,23 @@ class Backend:
             gather_forces,
         )
         from .kernels.forces import final_energy, impulse_energy
-        from .kernels.records import INFO_STEPS, INFO_T_END
+        from .kernels.records import INFO_DISSIPATED, INFO_STEPS, INFO_T_END
+        from .numba_backend import model_params
 
         R, M = masses.shape
         wall = bool(np.isinf(masses[0, -1]))
         for r in range(R):
-            chain = Chain(masses[r], stiffness[r], n, initial_velocity[r], observed)
+            chain = batch_chain(masses[r], stiffness[r], n, initial_velocity[r], observed, model)
             x, v = np.zeros(M), np.zeros(M)
             v[0] = initial_velocity[r]
-            st, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = self.integrate(
-                integrator, chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=True, controls=controls)
+            st, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, _ = self.integrate(
+                integrator, chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=chain.ends_at_exit, controls=controls)
             out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
             gather_forces(peak_f, peak_ft, contacts, wall, out["peak_force"][r], out["peak_force_time"][r], out["peak_wall"][r])
             out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]
             e0 = impulse_energy(masses[r, 0], initial_velocity[r])
-            out["energy_error"][r] = (final_energy(x, v, masses[r], stiffness[r], n, info) - e0) / e0
+            e1 = final_energy(x, v, masses[r], stiffness[r], model_params(chain), info) + info[INFO_DISSIPATED]
+            out["energy_error"][r] = (e1 - e0) / e0
             if st == 0:
                 out["n_valid"][0] += 1
                 accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])
@@ -112,6 +113,14 @@ class Backend:
 
     def __repr__(self) -> str:
         return f"<granchain backend {self.name!r}>"
+
+
+def batch_chain(masses, stiffness, n, initial_velocity, observed, model: dict | None = None):
+    """The :class:`granchain.Chain` of one row of a batch: its arrays, and the model the rows share
+    (``model``: the ``Chain`` keywords ``contact``, ``static_force``, ``striker``; None: the paper's)."""
+    from ..model.chain import Chain
+
+    return Chain(masses, stiffness, n, initial_velocity, observed, **(model or {}))
 
 
 def aligned_outputs(out: dict, n_observed: int):

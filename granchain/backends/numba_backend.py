@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Backend, aligned_outputs, effective_integrator
+from ..model.contacts import PowerLaw, Viscoelastic
+from . import Backend, aligned_outputs, batch_chain, effective_integrator
 from .kernels.batch import integrate_batch, thread_sums
 from .kernels.dispatch import integrate_chain
 from .kernels.forces import power_code
@@ -57,9 +58,10 @@ def method_record(integrator) -> Method:
 
 
 def model_params(chain) -> Params:
-    """The kernels' ``Params`` of ``chain``: the scalars its model declares (contact law, boundary).
-    The one place a new physics parameter is filled in."""
-    return Params(float(chain.n), power_code(chain.n), chain.boundary.wall)
+    """The kernels' ``Params`` of ``chain``: the scalars its model declares (contact law, boundary,
+    static load). The one place a new physics parameter is filled in."""
+    return Params(float(chain.n), power_code(chain.n), chain.boundary.wall, float(chain.contact.gamma),
+                  float(chain.static_force))
 
 
 def model_record(chain) -> Model:
@@ -67,46 +69,51 @@ def model_record(chain) -> Model:
     return Model(chain.masses, chain.stiffness, model_params(chain))
 
 
-def run_record(chain, t_grid, t_max, stop_at_exit, controls) -> Run:
-    """The kernel's ``Run``: what to record (``chain``'s observed granules, velocities on ``t_grid``)
-    and when to stop (``t_max``, or the pulse's exit with ``stop_at_exit``; ``controls``:
-    :class:`granchain.RunControls`)."""
+def run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed=None) -> Run:
+    """The kernel's ``Run``: what to record (``chain``'s observed granules, velocities on ``t_grid``, the
+    forces of the contacts ``sensed`` on it) and when to stop (``t_max``, or the pulse's exit with
+    ``stop_at_exit``; ``controls``: :class:`granchain.RunControls`)."""
     return Run(chain.observed, t_grid, float(t_max), bool(stop_at_exit), controls.exit_margin, controls.max_steps,
-               controls.peak_rtol)
+               controls.peak_rtol, no_contacts() if sensed is None else np.ascontiguousarray(sensed, dtype=np.int64))
 
 
-def outputs(n_observed: int, n_grid: int, n_granules: int) -> Outputs:
+def no_contacts() -> np.ndarray:
+    """An empty list of contacts (nothing recorded on the grid but velocities and the wall force)."""
+    return np.zeros(0, dtype=np.int64)
+
+
+def outputs(n_observed: int, n_grid: int, n_granules: int, n_sensed: int = 0) -> Outputs:
     """Zeroed outputs of one integration (velocities time-major: one contiguous row per grid time)."""
     return Outputs(np.zeros(n_observed), np.zeros(n_observed), np.zeros((n_grid, n_observed)), np.zeros(n_granules - 1),
-                   np.zeros(n_granules - 1), np.zeros(n_grid), np.zeros(INFO_SIZE))
+                   np.zeros(n_granules - 1), np.zeros(n_grid), np.zeros(INFO_SIZE), np.zeros((n_grid, n_sensed)))
 
 
 class NumbaBackend(Backend):
     """Compiled kernels (Numba) for DP5, RKN4 and Verlet; batches run in parallel threads."""
 
     name = "numba"
+    contact_laws = (PowerLaw, Viscoelastic)
 
-    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls):
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         self.check(integrator, chain)
         integrator.check_chains(chain.masses[None], chain.stiffness[None], chain.n, chain.initial_velocity)
         method = method_record(effective_integrator(integrator, chain))
-        out = outputs(chain.observed.size, t_grid.size, chain.size)
-        status = integrate_chain(method, model_record(chain), run_record(chain, t_grid, t_max, stop_at_exit, controls),
-                                 State(x, v), out)
-        return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
+        run = run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed)
+        out = outputs(chain.observed.size, t_grid.size, chain.size, run.contacts.size)
+        status = integrate_chain(method, model_record(chain), run, State(x, v), out)
+        return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f, out.grid_c
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls, scale: float, out: dict) -> None:
+                        controls, scale: float, out: dict, model: dict | None = None) -> None:
         import numba
 
-        from ..model.chain import Chain
-
         integrator.check_chains(masses, stiffness, n, initial_velocity)
-        first = Chain(masses[0], stiffness[0], n, initial_velocity[0], observed)  # the model the rows share
+        first = batch_chain(masses[0], stiffness[0], n, initial_velocity[0], observed, model)  # the model the rows share
         self.check(integrator, first)
         method = method_record(effective_integrator(integrator, first))
         lags, sum_a, sum_a2 = aligned_outputs(out, observed.shape[0])
-        run = Run(observed, t_grid, float(t_max), True, controls.exit_margin, controls.max_steps, controls.peak_rtol)
+        run = Run(observed, t_grid, float(t_max), first.ends_at_exit, controls.exit_margin, controls.max_steps,
+                  controls.peak_rtol, no_contacts())
         # Dynamic scheduling, one realisation at a time. Realisations differ in cost by up to 16x
         # (N = 6 decorated chains), and Numba's default static split (each thread a contiguous
         # half of the batch) left a thread idle for 1.2-3.6 % of a 1000-realisation chunk of the

@@ -8,7 +8,10 @@ SciPy's order-7 dense output found with ``scipy.optimize.brentq``, and so are th
 compression maxima of every contact (roots of v_k - v_{k+1}; force c_k delta^(n-1)
 there). Only the stopping rule (and the tie rule of peaks) is the same, so both
 integrators stop at the same physical event. A wall (last mass infinite) needs no
-special code beyond that rule: its acceleration F / inf is 0.
+special code beyond that rule: its acceleration F / inf is 0. The real contacts follow
+the same equations in their own NumPy code: the viscoelastic law (its dissipated
+energy one more component of the state, its force peaks roots of the force's rate) and
+the precompressed chain in displacements from its static state.
 """
 
 from __future__ import annotations
@@ -18,29 +21,59 @@ from scipy.integrate import DOP853 as _SciPyDOP853
 from scipy.optimize import brentq
 
 from .._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
+from ..model.contacts import PowerLaw, Viscoelastic
 from . import Backend
 from .kernels.peaks import write_info
 from .kernels.records import INFO_SIZE
 from .kernels.stop import RATTLER_MASS_RATIO
 
 
-def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float):
-    """f(t, y) for y = (x, v), Eq. (motion_rescaled), vectorised with NumPy."""
-    M = masses.size
+def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, static_force: float = 0.0):
+    """f(t, y) for y = (x, v) (and, for a viscoelastic law, the dissipated energy as a last component),
+    Eq. (motion_rescaled), vectorised with NumPy; returns (rhs, forces) with forces(x, v) the contacts'
+    total forces (static load included).
 
-    def forces(x):
-        d = x[:-1] - x[1:]
+    ``law`` is the chain's contact law (``granchain.model.contacts.PowerLaw`` or ``Viscoelastic``; its
+    NumPy ``force``); ``static_force`` F0 > 0 precompresses the chain: x are displacements from the
+    static state, each contact has the overlap delta0 = (F0 / c)^(1/(n-1)) and the accelerations come
+    from the forces less their static values (the external load balances them at the ends)."""
+    M = masses.size
+    gamma = getattr(law, "gamma", 0.0)
+    with np.errstate(divide="ignore"):
+        d0 = (static_force / stiffness) ** (1.0 / (n - 1.0)) if static_force > 0 else np.zeros(M - 1)
+    f0 = np.where(d0 > 0.0, stiffness * d0 ** (n - 1.0), 0.0)
+
+    def forces(x, v=None):
+        d = d0 + (x[:-1] - x[1:])
+        if gamma > 0.0:
+            w = v[:-1] - v[1:]
+            dp = np.where(d > 0.0, d, 0.0)
+            return np.where(d > 0.0, np.maximum(stiffness * dp ** (n - 2.0) * (dp + gamma * w), 0.0), 0.0)
         return np.where(d > 0.0, stiffness * np.abs(d) ** (n - 1.0), 0.0)
 
     def rhs(t, y):
-        x, v = y[:M], y[M:]
-        F = forces(x)
+        x, v = y[:M], y[M:2 * M]
+        F = forces(x, v)
+        G = F - f0
         a = np.zeros(M)
-        a[1:] += F
-        a[:-1] -= F
+        a[1:] += G
+        a[:-1] -= G
+        if gamma > 0.0:  # the power taken from the motion: (F - F_elastic) w
+            d = d0 + (x[:-1] - x[1:])
+            el = np.where(d > 0.0, stiffness * np.abs(d) ** (n - 1.0), 0.0)
+            power = np.sum(np.where(d > 0.0, (F - el) * (v[:-1] - v[1:]), 0.0))
+            return np.concatenate((v, a / masses, [power]))
         return np.concatenate((v, a / masses))
 
     return rhs, forces
+
+
+def _force_rate(d, w, dw, c, n, gamma):
+    """d/dt of the viscoelastic force c d^(n-2) (d + gamma w) at compression d, rate w and relative
+    acceleration dw (0 where the force is 0)."""
+    if d <= 0.0 or d + gamma * w <= 0.0:
+        return 0.0
+    return c * ((n - 1.0) * d ** (n - 2.0) * w + gamma * ((n - 2.0) * d ** (n - 3.0) * w * w + d ** (n - 2.0) * dw))
 
 
 def _first_nonpositive(f, t0, t1):
@@ -72,14 +105,24 @@ def _pulse_has_left(x, v, m) -> bool:
     return v[-1] > 0.0 and v[-2] < v[-1] and bool(np.all(v[:-1][heavy] < v[-1]))
 
 
-def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol, t_grid):
-    """Same contract as the compiled kernels; returns (status, info, peak_v, peak_t, grid_v, x, v, peak_f, peak_ft, grid_f)."""
+def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol,
+                     t_grid, law=None, static_force=0.0, sensed=()):
+    """Same contract as the compiled kernels; returns (status, info, peak_v, peak_t, grid_v, x, v, peak_f, peak_ft,
+    grid_f, grid_c)."""
     M = masses.size
-    rhs, forces = chain_rhs(masses, stiffness, n)
+    rhs, law_forces = chain_rhs(masses, stiffness, n, law, static_force)
+    gamma = getattr(law, "gamma", 0.0)
+    damped = gamma > 0.0
+    sensed = np.asarray(sensed, dtype=np.int64)
     wall = bool(np.isinf(masses[-1]))
-    y0 = np.concatenate((x0, v0))
+    y0 = np.concatenate((x0, v0, [0.0])) if damped else np.concatenate((x0, v0))
     solver = _SciPyDOP853(rhs, 0.0, y0, t_bound=t_max, rtol=rtol, atol=atol)
-    accel = lambda y: rhs(0.0, y)[M:]  # noqa: E731
+    accel = lambda y: rhs(0.0, y)[M:2 * M]  # noqa: E731
+
+    def forces(z):  # total contact forces of a state z = (x, v, ...)
+        return law_forces(z[:M], z[M:2 * M])
+
+    d0 = (static_force / stiffness) ** (1.0 / (n - 1.0)) if static_force > 0 else np.zeros(M - 1)
     peak_v = v0[obs].astype(float)
     peak_t = np.zeros(obs.size)
     grid_v = np.zeros((t_grid.size, obs.size))  # time-major, as the kernels
@@ -88,11 +131,14 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     peak_f = np.zeros(M - 1)
     peak_ft = np.zeros(M - 1)
     grid_f = np.zeros(t_grid.size)
+    grid_c = np.zeros((t_grid.size, sensed.size))
     if wall:
-        grid_f[:g] = forces(x0)[-1]
+        grid_f[:g] = forces(y0)[-1]
+    grid_c[:g] = forces(y0)[sensed]
     t_needed = t_grid[-1] if t_grid.size else 0.0
     a_old = accel(y0)
     v_old = v0.astype(float)
+    y_old = y0.copy()
     exit_since = -1.0
     n_steps = 0
     status = None
@@ -118,30 +164,49 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
                 vp = dense(tp)[M + k]
                 if vp > peak_v[q] + peak_rtol * abs(peak_v[q]):  # same tie rule as the kernels
                     peak_v[q], peak_t[q] = vp, tp
-        w_old, w_new = v_old[:-1] - v_old[1:], y[M:-1] - y[M + 1:]
-        for j in np.flatnonzero((w_old > 0.0) & (w_new <= 0.0)):  # compression maxima
-            def approach(s, j=j):  # relative velocity v_j - v_{j+1} on the dense output
+        w_old, w_new = v_old[:-1] - v_old[1:], y[M:2 * M - 1] - y[M + 1:2 * M]
+        if damped:  # the force peaks where its rate falls through 0 (before the compression peaks)
+            def rate(s, j):
                 z = dense(s)
-                return z[M + j] - z[M + j + 1]
+                a = accel(z)
+                return _force_rate(d0[j] + z[j] - z[j + 1], z[M + j] - z[M + j + 1], a[j] - a[j + 1], stiffness[j], n, gamma)
 
-            tp = _first_nonpositive(approach, t0, t1)
-            z = dense(tp)
-            d = z[j] - z[j + 1]
-            fp = stiffness[j] * d ** (n - 1.0) if d > 0.0 else 0.0
-            if fp > 0.0 and fp > peak_f[j] + peak_rtol * abs(peak_f[j]):
-                peak_f[j], peak_ft[j] = fp, tp
+            for j in range(M - 1):
+                r0 = _force_rate(d0[j] + y_old[j] - y_old[j + 1], v_old[j] - v_old[j + 1], a_old[j] - a_old[j + 1],
+                                 stiffness[j], n, gamma)
+                r1 = _force_rate(d0[j] + y[j] - y[j + 1], w_new[j], a_new[j] - a_new[j + 1], stiffness[j], n, gamma)
+                if r0 > 0.0 and r1 <= 0.0:
+                    tp = _first_nonpositive(lambda s, j=j: rate(s, j), t0, t1)
+                    fp = forces(dense(tp))[j]
+                    if fp > 0.0 and fp > peak_f[j] + peak_rtol * abs(peak_f[j]):
+                        peak_f[j], peak_ft[j] = fp, tp
+        else:
+            for j in np.flatnonzero((w_old > 0.0) & (w_new <= 0.0)):  # compression maxima
+                def approach(s, j=j):  # relative velocity v_j - v_{j+1} on the dense output
+                    z = dense(s)
+                    return z[M + j] - z[M + j + 1]
+
+                tp = _first_nonpositive(approach, t0, t1)
+                z = dense(tp)
+                d = d0[j] + z[j] - z[j + 1]
+                fp = stiffness[j] * d ** (n - 1.0) if d > 0.0 else 0.0
+                if fp > 0.0 and fp > peak_f[j] + peak_rtol * abs(peak_f[j]):
+                    peak_f[j], peak_ft[j] = fp, tp
         g_end = int(np.searchsorted(t_grid, t1, side="right"))
         if g_end > g:
             yg = dense(t_grid[g:g_end])
             grid_v[g:g_end] = yg[M + obs].T
+            fg = np.array([forces(z) for z in yg.T]) if (wall or sensed.size) else None
             if wall:
-                d = yg[M - 2] - yg[M - 1]
-                grid_f[g:g_end] = np.where(d > 0.0, stiffness[-1] * np.abs(d) ** (n - 1.0), 0.0)
+                grid_f[g:g_end] = fg[:, -1]
+            if sensed.size:
+                grid_c[g:g_end] = fg[:, sensed]
             g = g_end
         a_old = a_new
-        v_old = y[M:].copy()
+        v_old = y[M:2 * M].copy()
+        y_old = y.copy()
         if stop_at_exit:
-            if _pulse_has_left(y[:M], y[M:], masses):
+            if _pulse_has_left(y[:M], y[M:2 * M], masses):
                 if exit_since < 0.0:
                     exit_since = t1
                 if t1 >= max(exit_since + exit_margin, t_needed):
@@ -160,14 +225,15 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     for q, k in enumerate(obs):
         if a_end[k] > 0.0 and solver.y[M + k] > peak_v[q] + peak_rtol * abs(peak_v[q]):  # as final_peaks
             peak_v[q], peak_t[q] = solver.y[M + k], solver.t
-    x_end, v_end = solver.y[:M], solver.y[M:]
-    f_end = forces(x_end)
+    x_end, v_end = solver.y[:M], solver.y[M:2 * M]
+    f_end = forces(solver.y)
     for j in range(M - 1):  # as final_force_peaks
         if v_end[j] - v_end[j + 1] > 0.0 and f_end[j] > 0.0 and f_end[j] > peak_f[j] + peak_rtol * abs(peak_f[j]):
             peak_f[j], peak_ft[j] = f_end[j], solver.t
     info = np.zeros(INFO_SIZE)
-    write_info(info, solver.t, n_steps, 0, exit_since, solver.nfev, 0, 0.0)  # no rejections counted, no window
-    return status, info, peak_v, peak_t, grid_v, solver.y[:M].copy(), solver.y[M:].copy(), peak_f, peak_ft, grid_f
+    dissipated = float(solver.y[2 * M]) if damped else 0.0
+    write_info(info, solver.t, n_steps, 0, exit_since, solver.nfev, 0, 0.0, dissipated)  # no rejections counted, no window
+    return (status, info, peak_v, peak_t, grid_v, x_end.copy(), v_end.copy(), peak_f, peak_ft, grid_f, grid_c)
 
 
 class ScipyBackend(Backend):
@@ -177,13 +243,16 @@ class ScipyBackend(Backend):
 
     name = "scipy"
 
-    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls):
+    contact_laws = (PowerLaw, Viscoelastic)
+
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         self.check(integrator, chain)
-        status, info, peak_v, peak_t, grid_v, xf, vf, peak_f, peak_ft, grid_f = dop853_integrate(
+        status, info, peak_v, peak_t, grid_v, xf, vf, peak_f, peak_ft, grid_f, grid_c = dop853_integrate(
             chain.masses, chain.stiffness, chain.n, chain.observed, x.copy(), v.copy(),
             rtol=integrator.rtol, atol=integrator.atol, t_max=t_max, stop_at_exit=stop_at_exit,
             exit_margin=controls.exit_margin, max_steps=controls.max_steps, peak_rtol=controls.peak_rtol, t_grid=t_grid,
+            law=chain.contact, static_force=chain.static_force, sensed=() if sensed is None else sensed,
         )
         x[:] = xf
         v[:] = vf
-        return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f
+        return int(status), info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c

@@ -80,8 +80,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")
     p.add_argument("--threads", type=int, default=None, help="Numba threads for a local run (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors and warnings (no progress, no summary; failed integrations are reported on stderr)")
+    from ._contacts import add_contact_arguments
     from ._units import add_unit_arguments
 
+    add_contact_arguments(p)
     add_unit_arguments(p)
     p.set_defaults(func=run)
 
@@ -127,25 +129,31 @@ def _pair(text: str) -> tuple:
     return values
 
 
-def build_family(args):
-    """The chain family the arguments describe."""
+def build_family(args, units=None):
+    """The chain family the arguments describe (``units``: the physical scale, for real-contact options
+    given with units)."""
     from ..families import BinaryRandom, RandomDecorated, RandomRadii, TaperedDecorated
     from ..model.distributions import Uniform
+    from ._contacts import contacts_from_args
 
+    contacts = contacts_from_args(args, units, args.n)
+    if contacts.pop("wall_material") is not None:
+        raise ValueError("--wall-material applies to granchain pulse; an ensemble's wall is of the granules' own material")
     lo, hi = DEFAULT_INTERVAL.get(args.family, (None, None))
     if args.family == "binary":
         if args.alpha is not None or args.beta is not None:
             raise ValueError("--alpha/--beta do not apply to --family binary (it takes --radii RA,RB and --p)")
-        return BinaryRandom(args.size, _pair(args.radii), args.p, n=args.n, wall=args.wall)
+        return BinaryRandom(args.size, _pair(args.radii), args.p, n=args.n, wall=args.wall, **contacts)
     dist = Uniform(lo if args.alpha is None else args.alpha, hi if args.beta is None else args.beta)
     if args.family == "polydisperse":
-        return RandomRadii(args.size, dist, n=args.n, wall=args.wall)
+        return RandomRadii(args.size, dist, n=args.n, wall=args.wall, **contacts)
     if args.family == "tapered-decorated":
-        return TaperedDecorated(args.large, q=args.q, distribution=dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall)
-    return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall)
+        return TaperedDecorated(args.large, q=args.q, distribution=dist, n=args.n, momentum_conserving=args.momentum_conserving,
+                                wall=args.wall, **contacts)
+    return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall, **contacts)
 
 
-def build_integrator(args, chains):
+def build_integrator(args, chains, conservative: bool = True):
     """The integrator the arguments name, with its settings. Without --integrator (or with dp5 or rkn4)
     and without --rtol/--atol: a {chain kind: integrator} dict of each kind's ensemble default
     (``ensemble_integrator``: rkn4 for decorated chains, dp5 for the others), or of the named
@@ -173,7 +181,7 @@ def build_integrator(args, chains):
 
     def default(kind):  # the kind's ensemble default, or the named method at that kind's tolerances
         if cls is None:
-            return ensemble_integrator(kind)
+            return ensemble_integrator(kind, conservative=conservative)
         return cls.relaxed() if kind == "decorated" else cls.relaxed(SMOOTH_RTOL, SMOOTH_ATOL)
 
     if args.rtol is None and args.atol is None:  # each chain kind's default tolerances
@@ -214,7 +222,7 @@ def run(args) -> int:
 
     check_arguments(args)
     units = scale_from_args(args)  # None without unit options; checked before integrating
-    family = build_family(args)
+    family = build_family(args, units)
     grid = family.default_time_grid(args.dt)
     if args.t_end is not None:
         if not args.t_end > 0:
@@ -223,7 +231,7 @@ def run(args) -> int:
     chains = tuple(c.strip() for c in args.chain.split(","))
     if chains == ("both",) or len(family.chains) == 1 and args.chain == "both":
         chains = "both"
-    integrator = build_integrator(args, family.chains if chains == "both" else chains)
+    integrator = build_integrator(args, family.chains if chains == "both" else chains, family.contact_law.conservative)
     client = connect(args.scheduler)
     try:
         ds = run_ensemble(

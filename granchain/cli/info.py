@@ -95,6 +95,18 @@ def _integrator_lines(integ: dict, per_chain: dict | None) -> list:
     return [line("integrator" if i == 0 else "", r) + f"  ({kind} chains)" for i, (kind, r) in enumerate(per_chain.items())]
 
 
+def _contacts_line(family: dict) -> str:
+    """The family's contacts in words: the paper's, or the real contacts its record holds."""
+    parts = []
+    law = family.get("contact") or (family.get("contact_model") if family.get("contact_model", {}).get("law") == "viscoelastic" else None)
+    parts.append(f"viscoelastic, gamma = {law['gamma']:.6g}" if law else f"elastic power law, n = {family.get('n', 2.5):g}")
+    f0 = family.get("static_force") or family.get("contact_model", {}).get("static_force")
+    parts.append(f"precompressed by F0 = {f0:.6g}" if f0 else "unloaded")
+    m = family.get("striker_mass") or family.get("contact_model", {}).get("striker_mass")
+    parts.append(f"struck by a striker of mass {m:.6g}" if m else "granule 1 struck")
+    return f"{'contacts':<12} " + ", ".join(parts) + " (rescaled units)"
+
+
 def run(args) -> int:
     from .._status import Status
 
@@ -106,6 +118,7 @@ def run(args) -> int:
     lines = [
         f"store        {info['store']} ({_human(info['size_bytes'])} on disk, granchain {info['granchain_version']})",
         f"family       {fam.pop('family', '?')}: " + ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(fam.items())),
+        _contacts_line(info["family"]),
         *_integrator_lines(info["integrator"], info.get("chain_integrators")),
         f"run          {info['realizations']} realisations, seed {info['seed']}, chains {', '.join(info['chains'])}, "
         f"chunks of {info['chunk_size']}",

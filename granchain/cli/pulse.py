@@ -8,6 +8,7 @@ import sys
 import numpy as np
 
 from ..solve.integrators import INTEGRATORS
+from ._contacts import add_contact_arguments, apply_to_chain, contacts_from_args
 from ._units import add_unit_arguments, scale_from_args
 
 
@@ -64,6 +65,7 @@ def add_parser(subparsers) -> None:
         'print {"granule": [...], "peak_velocity": [...], "peak_time": [...]} only (rescaled); with --wall also "wall": '
         '{"peak_force", "peak_force_time", "impulse"}; with physical units also "physical": {"peak_velocity_m_s", '
         '"peak_time_s", "peak_force_N", ..., "scale": {...}}'))
+    add_contact_arguments(p, sensor=True)
     add_unit_arguments(p)
     p.set_defaults(func=run)
 
@@ -114,21 +116,44 @@ def _wall_summary(result, scale=None) -> str:
     return text
 
 
+def _sensor_summary(result, scale=None) -> str:
+    peak, when = result.sensor_peak()
+    lines = []
+    for k, f, t in zip(result.sensor_granule, peak, when):
+        text = f"# sensor granule {k}: peak force {f:.9g} at t = {t:.6f}"
+        if result.static_force > 0:
+            text += f" (dynamic {f - result.static_force:.9g})"
+        if scale is not None:
+            text += f"; {f * scale.force:.6g} N at {t * scale.time:.6e} s"
+        lines.append(text)
+    return "\n".join(lines)
+
+
 def run(args) -> int:
     import granchain as gc
 
     if args.momentum_conserving and not args.effective:
         raise ValueError("--momentum-conserving applies only to the effective chain: add --effective (with --small-radii)")
     units = scale_from_args(args)  # None without unit options; checked before integrating
+    contacts = contacts_from_args(args, units, args.n)
     if args.small_radii is not None:
-        chain = gc.decorated(_floats(args.small_radii, "--small-radii"), n=args.n, wall=args.wall)
+        chain = gc.decorated(_floats(args.small_radii, "--small-radii"), n=args.n)
         if args.effective:
             chain = gc.effective(chain, momentum_conserving=args.momentum_conserving)
     else:
         if args.effective:
             raise ValueError("--effective needs --small-radii (a decorated chain)")
-        chain = gc.from_radii(_floats(args.radii, "--radii"), n=args.n, wall=args.wall)
-    result = gc.simulate(chain, _integrator(args))
+        chain = gc.from_radii(_floats(args.radii, "--radii"), n=args.n)
+    if args.wall:
+        material = contacts["wall_material"]
+        chain = chain.with_wall(material=material) if material is not None else chain.with_wall()
+    chain = apply_to_chain(chain, contacts)
+    sensors = None if args.sensor is None else [int(k) for k in _floats(args.sensor, "--sensor")]
+    grid = None
+    if sensors is not None:  # the sensors' force on a grid over the pulse's passage (and, loaded, its reflection)
+        t_end = gc.default_t_max(chain) if chain.static_force > 0 else 2.5 * chain.size + 20.0
+        grid = np.arange(0.0, t_end, 0.01)
+    result = gc.simulate(chain, _integrator(args), t_grid=grid, sensors=sensors)
     # Decorated (and effective) chains are reported by large-granule index k = 1..N
     # (decorated chain index 2k - 1); a chain from --radii by its own index.
     labels = np.arange(1, result.granule.size + 1) if args.small_radii is not None else result.granule
@@ -145,6 +170,12 @@ def run(args) -> int:
         if chain.wall:
             out["wall"] = {"peak_force": result.peak_wall_force, "peak_force_time": result.peak_wall_force_time,
                            "impulse": result.wall_impulse}
+        if not chain.elastic or chain.striker:
+            out["contact_model"] = chain.describe_model()
+            out["dissipated_energy"] = result.dissipated_energy
+        if sensors is not None:
+            peak, when = result.sensor_peak()
+            out["sensor"] = {"granule": sensors, "peak_force": peak.tolist(), "peak_force_time": when.tolist()}
         if phys is not None:
             physical = phys.as_dict()  # with peak_force_N, peak_force_time_s per contact
             if chain.wall:
@@ -163,6 +194,13 @@ def run(args) -> int:
             print(_force_table(result, units))
         if chain.wall and units is not None:
             print(_wall_summary(result, units))
+        if sensors is not None:
+            print(_sensor_summary(result, units))
+        if chain.contact.gamma > 0:
+            e = f"# dissipated energy {result.dissipated_energy:.6g} of {chain.energy:.6g} (rescaled)"
+            if units is not None:
+                e += f"; {result.dissipated_energy * units.energy:.6g} J"
+            print(e)
     if not result.ok:
         print(f"warning: {result.status.name}: {result.message}", file=sys.stderr)
         return 1

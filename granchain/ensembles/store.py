@@ -46,9 +46,9 @@ def integrators_as_run(spec) -> dict:
     """{chain kind: the record of its integrator as it runs on the family's chains}
     (``granchain.backends.integrator_as_run``): derived from the parameters, so not compared on resume."""
     from ..backends import integrator_as_run
-    from ..model.contacts import FreeEnd, RigidWall
+    from ..model.contacts import FreeEnd, LoadedEnd, RigidWall
 
-    boundary = RigidWall if spec.family.wall else FreeEnd
+    boundary = RigidWall if spec.family.wall else (LoadedEnd if spec.family.static_force > 0 else FreeEnd)
     return {kind: integrator_as_run(integ, boundary) for kind, integ in spec.chain_integrators.items()}
 
 
@@ -77,6 +77,9 @@ def _attrs(spec) -> dict:
         "granchain_integrator_as_run": json.dumps(integrators_as_run(spec), sort_keys=True),
         "granchain_version": __version__,
         "created": created,
+        **({} if family.elastic else {"granchain_contact_model": json.dumps(
+            {**family.contact_law.describe(), "static_force": family.static_force, "striker_mass": family.striker_mass},
+            sort_keys=True)}),
         "family": family.kind,
         "realizations": spec.realizations,
         "seed": spec.seed,
@@ -695,6 +698,19 @@ def current_record(record: dict) -> dict:
     return record
 
 
+def _flatten(record: dict, prefix: str = "") -> dict:
+    """{"family.contact.gamma": 0.07, ...}: a nested record's leaves by dotted path, so that a refusal names
+    the very settings that differ (a contact law's damping, a static force) rather than whole records."""
+    out = {}
+    for key, value in record.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict) and value:
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
 def check_same_parameters(path, stored: str | None, spec, extend: bool = False) -> int:
     """Refuse to resume a store written with other parameters, listing the differences; returns the
     stored number of realisations (with ``extend``, a store may hold fewer than asked: it is extended)."""
@@ -715,7 +731,9 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
     if extend and isinstance(stored_r, int) and stored_r <= new["realizations"]:
         old = {**old, "realizations": new["realizations"]}
     if old != new:
-        diff = ", ".join(f"{k}: stored {old.get(k)!r}, asked {new.get(k)!r}" for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k))
+        flat_old, flat_new = _flatten(old), _flatten(new)
+        diff = ", ".join(f"{k}: stored {flat_old.get(k)!r}, asked {flat_new.get(k)!r}"
+                         for k in sorted(set(flat_old) | set(flat_new)) if flat_old.get(k) != flat_new.get(k))
         hint = " (a store can be extended to more realisations, never shrunk)" if old.get("realizations") != new["realizations"] else ""
         if old.get("integrator") != new.get("integrator") or old.get("chain_integrators") != new.get("chain_integrators"):
             hint += (" (a store written with the exact DP5, every granule integrated to the end as before "

@@ -20,7 +20,10 @@ Families: :class:`RandomDecorated` (the paper's chain), :class:`TaperedDecorated
 :class:`CustomFamily` (a user's function). Every family but the custom one takes
 ``wall=True``: its chains then end in a rigid wall (a last granule of infinite mass,
 :meth:`granchain.Chain.with_wall`), how protectors are tested; the free end is the
-default. Units are the paper's rescaled ones (Sec. II):
+default. Every family but the custom one also takes the real contacts of
+``granchain.model.contacts``: ``contact=granchain.Viscoelastic(gamma)`` (dissipation),
+``static_force=F0`` (precompression) and ``striker_mass=M`` (a free striker in front of
+granule 1); a custom family's chains bring their own. Units are the paper's rescaled ones (Sec. II):
 radii in units of the reference (large) radius, masses R^3, the struck granule starts
 with velocity 1.
 """
@@ -45,6 +48,7 @@ from ..model.chain import (
     sphere_stiffness,
     wall_stiffness,
 )
+from ..model.contacts import PowerLaw, Precompression, Viscoelastic
 from ..model.distributions import (
     as_distribution,
     distribution_from_record,
@@ -122,6 +126,20 @@ def _add_wall(batch: ChainBatch, last_radius) -> ChainBatch:
     return batch._replace(masses=masses, stiffness=stiffness, contacts=contacts)
 
 
+def _add_striker(batch: ChainBatch, mass: float, first_radius) -> ChainBatch:
+    """The batch struck by a free sphere of ``mass`` (radius mass^(1/3), one material) in front of its
+    first granule (radius ``first_radius``): the expressions of :meth:`granchain.Chain.with_striker`,
+    so that rows stay bitwise the single chains. Observed granules and recorded contacts shift by one
+    (the striker's own contact is not recorded)."""
+    R = batch.masses.shape[0]
+    r_s = np.full(R, (mass / 1.0) ** (1.0 / 3.0))
+    pair = np.stack((r_s, np.broadcast_to(first_radius, (R,)).astype(float)), axis=1)
+    contacts = batch.recorded_contacts() + 1  # fixed before the striker's contact is added
+    return batch._replace(masses=np.concatenate((np.full((R, 1), float(mass)), batch.masses), axis=1),
+                          stiffness=np.concatenate((sphere_stiffness(pair), batch.stiffness), axis=1),
+                          observed=np.asarray(batch.observed) + 1, contacts=contacts)
+
+
 class ChainFamily:
     """Base of every chain family (see the module docstring for the contract).
 
@@ -129,11 +147,89 @@ class ChainFamily:
     CLI name) and implement :meth:`parameters`, :meth:`dims`, :meth:`draw`,
     :meth:`build`, :meth:`chain`, :meth:`describe` and the properties :attr:`chains`,
     :attr:`size`, :attr:`n_observed` and :meth:`granule_coordinate`.
+
+    The real contacts the chains share (the concrete families have these fields): ``contact``, the
+    contact law (None: ``PowerLaw(n)``, the paper's; or a :class:`granchain.Viscoelastic`),
+    ``static_force`` (the precompression F0, 0: none) and ``striker_mass`` (None: granule 1 struck
+    with velocity 1; else a free sphere of that mass, rescaled, struck instead, one material).
     """
 
     kind: ClassVar[str]
     n: float
     wall: bool = False  # (a class default; the concrete families have a ``wall`` field)
+    contact: object = None
+    static_force: float = 0.0
+    striker_mass: float | None = None
+
+    # -- real contacts --------------------------------------------------------------------
+    def _validate_model(self) -> None:
+        law = self.contact
+        if law is not None:
+            if not isinstance(law, (PowerLaw, Viscoelastic)):
+                raise ValueError(f"contact must be a granchain.PowerLaw or granchain.Viscoelastic law (or None), got {law!r}")
+            if law.n != self.n:
+                raise ValueError(f"the contact law's exponent n = {law.n:g} differs from the family's n = {self.n:g}: give the same n")
+            if isinstance(law, PowerLaw):
+                law = None  # the default, recorded as such (stores of the paper's chain keep their record)
+        object.__setattr__(self, "contact", law)
+        force = Precompression(self.static_force).force
+        if force > 0 and self.n <= 1.0:
+            raise ValueError(f"precompression needs an exponent n > 1, got n = {self.n:g}")
+        object.__setattr__(self, "static_force", force)
+        if self.striker_mass is not None:
+            object.__setattr__(self, "striker_mass", finite_scalar("striker_mass", self.striker_mass, positive=True))
+
+    @property
+    def contact_law(self):
+        """The chains' contact law (``PowerLaw(n)`` unless a viscoelastic one was given)."""
+        return PowerLaw(self.n) if self.contact is None else self.contact
+
+    @property
+    def elastic(self) -> bool:
+        """The paper's contacts: no damping, no static load, no striker."""
+        return self.contact is None and self.static_force == 0.0 and self.striker_mass is None
+
+    def model(self) -> dict | None:
+        """What the chains share besides their arrays, as :class:`granchain.Chain` keywords (the
+        ``model`` of ``Integrator.integrate_batch``); None for the paper's chains."""
+        if self.elastic:
+            return None
+        return {"contact": self.contact_law, "static_force": self.static_force, "striker": self.striker_mass is not None}
+
+    def _with_model(self, record: dict) -> dict:
+        """A :meth:`describe` record with the real contacts that differ from the paper's (records of the
+        paper's chains stay as before, so their stores resume unchanged; a store resumed with other
+        contact settings is refused with the difference)."""
+        extra = {}
+        if self.contact is not None:
+            extra["contact"] = self.contact.describe()
+        if self.static_force > 0:
+            extra["static_force"] = self.static_force
+        if self.striker_mass is not None:
+            extra["striker_mass"] = self.striker_mass
+        return {**record, **extra}
+
+    def _model_label(self) -> str:
+        parts = []
+        if self.contact is not None:
+            parts.append(f"viscoelastic gamma = {self.contact.gamma:.4g}")
+        if self.static_force > 0:
+            parts.append(f"precompressed F0 = {self.static_force:.4g}")
+        if self.striker_mass is not None:
+            parts.append(f"striker of mass {self.striker_mass:.4g}")
+        return (", " + ", ".join(parts)) if parts else ""
+
+    def _model_batch(self, batch: ChainBatch, first_radius) -> ChainBatch:
+        """The batch with the family's striker (before its wall, if any: call this first)."""
+        return batch if self.striker_mass is None else _add_striker(batch, self.striker_mass, first_radius)
+
+    def _model_chain(self, chain: Chain) -> Chain:
+        """One chain with the family's real contacts (bitwise a row of :meth:`build`)."""
+        if self.striker_mass is not None:
+            chain = chain.with_striker(mass=self.striker_mass)
+        if self.contact is not None or self.static_force > 0:
+            chain = chain.replace(contact=self.contact_law, static_force=self.static_force)
+        return chain
 
     # -- what the family is -------------------------------------------------------------
     @property
@@ -277,6 +373,7 @@ class _Decorated(ChainFamily):
         object.__setattr__(self, "n", exponent(self.n))
         object.__setattr__(self, "momentum_conserving", bool(self.momentum_conserving))
         object.__setattr__(self, "wall", _flag("wall", self.wall))
+        self._validate_model()
 
     def large_radii(self) -> np.ndarray:
         raise NotImplementedError
@@ -355,13 +452,16 @@ class _Decorated(ChainFamily):
             # As granchain.effective: velocity 1, or m_1 v_1 / mu_1 (momentum-conserving).
             v0 = sphere_mass(big[:, 0]) * 1.0 / mu[:, 0] if self.momentum_conserving else np.ones(R)
             batch = ChainBatch(mu, c_eff, v0, np.arange(G + 1), self.n, np.arange(G))
+        batch = self._model_batch(batch, big[:, 0])
         return _add_wall(batch, big[:, -1]) if self.wall else batch
 
     def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
         chain = self._chain_name(chain)
         small = self.draw(realization_rng(seed, realization))["small_radius"]
         exact = decorated(small, large_radius=self.large_radii(), n=self.n, wall=self.wall)
-        return exact if chain == "decorated" else effective(exact, momentum_conserving=self.momentum_conserving)
+        # The effective chain carries the same real contacts: its renormalisation (paper Sec. III A) is
+        # derived for elastic, unloaded contacts, so with them it is a model to compare, not a theorem.
+        return self._model_chain(exact if chain == "decorated" else effective(exact, momentum_conserving=self.momentum_conserving))
 
 
 @dataclass(frozen=True)
@@ -380,6 +480,9 @@ class RandomDecorated(_Decorated):
     n: float = HERTZ
     momentum_conserving: bool = False
     wall: bool = False
+    contact: object = None
+    static_force: float = 0.0
+    striker_mass: float | None = None
 
     kind: ClassVar[str] = "decorated"
 
@@ -390,11 +493,13 @@ class RandomDecorated(_Decorated):
         return np.ones(self.n_large)
 
     def describe(self) -> dict:
-        return self._walled({"family": self.kind, "n_large": self.n_large, "distribution": self.distribution.describe(),
-                             "n": self.n, "momentum_conserving": self.momentum_conserving})
+        return self._with_model(self._walled({"family": self.kind, "n_large": self.n_large,
+                                              "distribution": self.distribution.describe(), "n": self.n,
+                                              "momentum_conserving": self.momentum_conserving}))
 
     def label(self) -> str:
-        return f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}{self._wall_label()}"
+        return (f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}{self._wall_label()}"
+                f"{self._model_label()}")
 
     def arrival_ratio(self) -> float:
         return 1.0
@@ -437,11 +542,15 @@ class TaperedDecorated(_Decorated):
     n: float = HERTZ
     momentum_conserving: bool = False
     wall: bool = False
+    contact: object = None
+    static_force: float = 0.0
+    striker_mass: float | None = None
 
     kind: ClassVar[str] = "tapered-decorated"
 
     def __init__(self, n_large: int = 26, *args, q: float | None = None, distribution=None, n: float = HERTZ,
-                 momentum_conserving: bool = False, wall: bool = False, ratio: float | None = None):
+                 momentum_conserving: bool = False, wall: bool = False, ratio: float | None = None, contact=None,
+                 static_force: float = 0.0, striker_mass: float | None = None):
         if len(args) > 5:
             raise TypeError(f"TaperedDecorated takes at most 6 positional arguments, got {1 + len(args)}")
         if args:  # the signature of granchain <= 0.4: (n_large, ratio, distribution, n, momentum_conserving, wall)
@@ -461,7 +570,8 @@ class TaperedDecorated(_Decorated):
                           DeprecationWarning, stacklevel=2)
             q = _q_of_ratio(ratio)
         for name, value in (("n_large", n_large), ("q", 0.05 if q is None else q), ("distribution", distribution), ("n", n),
-                            ("momentum_conserving", momentum_conserving), ("wall", wall)):
+                            ("momentum_conserving", momentum_conserving), ("wall", wall), ("contact", contact),
+                            ("static_force", static_force), ("striker_mass", striker_mass)):
             object.__setattr__(self, name, value)
         self.__post_init__()
 
@@ -481,12 +591,13 @@ class TaperedDecorated(_Decorated):
         return (1.0 - self.q) ** np.arange(self.n_large, dtype=float)
 
     def describe(self) -> dict:
-        return self._walled({"family": self.kind, "n_large": self.n_large, "q": self.q, "large_radii": _TAPER,
-                             "distribution": self.distribution.describe(), "n": self.n,
-                             "momentum_conserving": self.momentum_conserving})
+        return self._with_model(self._walled({"family": self.kind, "n_large": self.n_large, "q": self.q, "large_radii": _TAPER,
+                                              "distribution": self.distribution.describe(), "n": self.n,
+                                              "momentum_conserving": self.momentum_conserving}))
 
     def label(self) -> str:
-        return f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}{self._wall_label()}"
+        return (f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}"
+                f"{self._wall_label()}{self._model_label()}")
 
 
 # ---------------------------------------------------------------------------- undecorated families
@@ -514,12 +625,13 @@ class _RadiiFamily(ChainFamily):
         self._chain_name(chain)
         radii = self.radii_of(params)
         batch = ChainBatch(sphere_mass(radii), sphere_stiffness(radii), np.ones(radii.shape[0]), np.arange(self.size), self.n)
+        batch = self._model_batch(batch, radii[:, 0])
         return _add_wall(batch, radii[:, -1]) if self.wall else batch
 
     def chain(self, seed: int, realization: int, chain: str | None = None) -> Chain:
         self._chain_name(chain)
         params = {k: np.asarray(v)[None] for k, v in self.draw(realization_rng(seed, realization)).items()}
-        return from_radii(self.radii_of(params)[0], n=self.n, kind=self.kind, wall=self.wall)
+        return self._model_chain(from_radii(self.radii_of(params)[0], n=self.n, kind=self.kind, wall=self.wall))
 
 
 @dataclass(frozen=True)
@@ -533,6 +645,9 @@ class RandomRadii(_RadiiFamily):
     distribution: object = None
     n: float = HERTZ
     wall: bool = False
+    contact: object = None
+    static_force: float = 0.0
+    striker_mass: float | None = None
 
     kind: ClassVar[str] = "polydisperse"
 
@@ -543,6 +658,7 @@ class RandomRadii(_RadiiFamily):
         object.__setattr__(self, "distribution", as_distribution(self.distribution))
         object.__setattr__(self, "n", exponent(self.n))
         object.__setattr__(self, "wall", _flag("wall", self.wall))
+        self._validate_model()
 
     def parameters(self) -> tuple:
         return (RandomParameter("radius", ("granule",), "float64", _RADIUS_UNITS, "radius of the granule"),)
@@ -554,10 +670,11 @@ class RandomRadii(_RadiiFamily):
         return _stack(params, "radius")
 
     def describe(self) -> dict:
-        return self._walled({"family": self.kind, "size": self.size, "distribution": self.distribution.describe(), "n": self.n})
+        return self._with_model(self._walled({"family": self.kind, "size": self.size,
+                                              "distribution": self.distribution.describe(), "n": self.n}))
 
     def label(self) -> str:
-        return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}{self._wall_label()}"
+        return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}{self._wall_label()}{self._model_label()}"
 
 
 @dataclass(frozen=True)
@@ -572,6 +689,9 @@ class BinaryRandom(_RadiiFamily):
     p: float = 0.5
     n: float = HERTZ
     wall: bool = False
+    contact: object = None
+    static_force: float = 0.0
+    striker_mass: float | None = None
 
     kind: ClassVar[str] = "binary"
 
@@ -588,6 +708,7 @@ class BinaryRandom(_RadiiFamily):
         object.__setattr__(self, "p", p)
         object.__setattr__(self, "n", exponent(self.n))
         object.__setattr__(self, "wall", _flag("wall", self.wall))
+        self._validate_model()
 
     def parameters(self) -> tuple:
         return (RandomParameter("species", ("granule",), "int8", "1", "species of the granule (0 = a, 1 = b)"),)
@@ -601,10 +722,12 @@ class BinaryRandom(_RadiiFamily):
         return np.where(species == 1, self.radii[1], self.radii[0]).astype(float)
 
     def describe(self) -> dict:
-        return self._walled({"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p, "n": self.n})
+        return self._with_model(self._walled({"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p,
+                                              "n": self.n}))
 
     def label(self) -> str:
-        return f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}{self._wall_label()}"
+        return (f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}{self._wall_label()}"
+                f"{self._model_label()}")
 
 
 # ---------------------------------------------------------------------------- a user's family
@@ -711,9 +834,34 @@ class CustomFamily(ChainFamily):
         if ch.size != p.size or not np.array_equal(ch.observed, p.observed) or ch.n != p.n:
             raise ValueError(f"build(rng) gave a chain of {ch.size} granules observing {ch.observed.size} (n = {ch.n:g}); "
                              f"every realisation must match the first: {p.size} granules, {p.observed.size} observed, n = {p.n:g}")
+        if ch.describe_model() != p.describe_model() or ch.striker != p.striker:
+            raise ValueError(f"build(rng) gave a chain with other contacts ({ch.describe_model()}) than the first call "
+                             f"({p.describe_model()}): every realisation must share its contact law, static load and striker")
         if not self.returns_chain:
             return {"radius": ch.radii}
         return {"mass": ch.masses, "stiffness": ch.stiffness, "initial_velocity": ch.initial_velocity}
+
+    @property
+    def contact_law(self):
+        return self._probe.contact
+
+    @property
+    def static_force(self) -> float:
+        return self._probe.static_force
+
+    @property
+    def striker_mass(self) -> float | None:
+        return float(self._probe.masses[0]) if self._probe.striker else None
+
+    @property
+    def elastic(self) -> bool:
+        return self._probe.elastic and not self._probe.striker
+
+    def model(self) -> dict | None:
+        """The real contacts of the chains the function returns (those of the first call: every
+        realisation must have the same)."""
+        p = self._probe
+        return None if self.elastic else {"contact": p.contact, "static_force": p.static_force, "striker": p.striker}
 
     def build(self, params: dict, chain: str) -> ChainBatch:
         self._chain_name(chain)
@@ -738,7 +886,8 @@ class CustomFamily(ChainFamily):
         return {"family": self.kind, "name": self.name, "build": f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', repr(fn))}",
                 "source_sha256": hashlib.sha256(source.encode()).hexdigest(), "size": self.size,
                 "returns": "chain" if self.returns_chain else "radii",
-                "observed": None if self.observed is None else list(self.observed), "n": self._probe.n}
+                "observed": None if self.observed is None else list(self.observed), "n": self._probe.n,
+                **({} if self.elastic else {"contact_model": self._probe.describe_model()})}
 
     def label(self) -> str:
         return f"custom family {self.name!r}, M = {self.size}"
@@ -756,22 +905,40 @@ def family_from_record(record: dict) -> ChainFamily:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # warned about when the ensemble was made
         wall = bool(record.get("wall", False))
+        model = _model_of_record(record)
         if kind == RandomDecorated.kind:
             return RandomDecorated(record["n_large"], distribution_from_record(record["distribution"]), n=record["n"],
-                                   momentum_conserving=record["momentum_conserving"], wall=wall)
+                                   momentum_conserving=record["momentum_conserving"], wall=wall, **model)
         if kind == TaperedDecorated.kind:
             # records of granchain <= 0.4 hold the ratio of successive large radii under "q"
             q = record["q"] if record.get("large_radii") == _TAPER else _q_of_ratio(record["q"])
             return TaperedDecorated(record["n_large"], q=q, distribution=distribution_from_record(record["distribution"]),
-                                    n=record["n"], momentum_conserving=record["momentum_conserving"], wall=wall)
+                                    n=record["n"], momentum_conserving=record["momentum_conserving"], wall=wall, **model)
         if kind == RandomRadii.kind:
-            return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"], wall=wall)
+            return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"], wall=wall,
+                               **model)
         if kind == BinaryRandom.kind:
-            return BinaryRandom(record["size"], tuple(record["radii"]), record["p"], n=record["n"], wall=wall)
+            return BinaryRandom(record["size"], tuple(record["radii"]), record["p"], n=record["n"], wall=wall, **model)
     if kind == CustomFamily.kind:
         raise ValueError(f"a CustomFamily ({record.get('build')}) cannot be rebuilt from its record: pass the family itself")
     raise ValueError(f"unknown chain family {kind!r}; known: {sorted(FAMILIES)}")
 
+
+
+def _model_of_record(record: dict) -> dict:
+    """The real-contact keywords of a family record (:meth:`ChainFamily._with_model`; none in records
+    of the paper's chains)."""
+    out = {}
+    law = record.get("contact")
+    if law is not None:
+        if law.get("law") != "viscoelastic":
+            raise ValueError(f"unknown contact law in the stored record: {law!r}")
+        out["contact"] = Viscoelastic(law["gamma"], law["n"])
+    if record.get("static_force"):
+        out["static_force"] = float(record["static_force"])
+    if record.get("striker_mass") is not None:
+        out["striker_mass"] = float(record["striker_mass"])
+    return out
 
 
 def family_from_dataset(ds) -> ChainFamily:

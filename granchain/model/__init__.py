@@ -1,9 +1,12 @@
 """The model: what a chain *is*, as values, before anything integrates it.
 
-- :mod:`~granchain.model.contacts`: the contact law (:class:`PowerLaw`, paper Eq. hertz-1), the far
-  boundary (:class:`FreeEnd`, :class:`RigidWall`) and the initial state (:class:`Impulse`), small
-  frozen values that declare the assumptions they license (forces depend on positions only, the
-  granules ahead of the pulse are exactly at rest, the pulse leaves for good);
+- :mod:`~granchain.model.contacts`: the contact law (:class:`PowerLaw`, paper Eq. hertz-1, and the
+  dissipative :class:`Viscoelastic`), the static load (:class:`Precompression`), the far boundary
+  (:class:`FreeEnd`, :class:`LoadedEnd`, :class:`RigidWall`) and the initial state (:class:`Impulse`,
+  :class:`Striker`), small frozen values that declare the assumptions they license (forces depend on
+  positions only, the granules ahead of the pulse are exactly at rest, the pulse leaves for good);
+- :mod:`~granchain.model.collision`: the two-body collision of the viscoelastic law (its coefficient
+  of restitution, and the damping that gives one);
 - :mod:`~granchain.model.chain`: :class:`~granchain.Chain` (masses, stiffnesses, exponent, the values
   above) and its builders from radii (paper Sec. II, Eq. r-prime);
 - :mod:`~granchain.model.effective`: the decorated chain's effective chain (paper Sec. III A);
@@ -14,6 +17,6 @@ Everything here is NumPy and SciPy (no compiled code): solving (:mod:`granchain.
 compiled code (:mod:`granchain.backends`) read these values, never the other way round.
 """
 
-from .contacts import FreeEnd, Impulse, PowerLaw, RigidWall
+from .contacts import FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, RigidWall, Striker, Viscoelastic
 
-__all__ = ["PowerLaw", "FreeEnd", "RigidWall", "Impulse"]
+__all__ = ["PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "RigidWall", "Impulse", "Striker"]

@@ -1,7 +1,8 @@
 """One representation for every chain, and the builders that make one.
 
 A :class:`Chain` is granules 1..M on a line, just touching (no precompression),
-all at rest except granule 1 which moves with ``initial_velocity``. Neighbours
+all at rest except granule 1 which moves with ``initial_velocity`` (the paper's
+chain; real contacts below). Neighbours
 k, k+1 repel with the power-law potential (c_k / n) delta^n while
 delta = x_k - x_{k+1} > 0 (paper Eq. hertz-1 in the rescaled form of Eq.
 motion_rescaled). Everything the integrators need is in ``masses``,
@@ -14,9 +15,18 @@ stiffness is the limit of Eq. (r-prime) for R_{M} -> infinity, sqrt(2 R_{M-1})
 (:func:`wall_stiffness`). Build one with ``wall=True`` on the builders or
 :meth:`Chain.with_wall`; the free end stays the default (the paper's case).
 
+Real contacts are values of the chain too (``granchain.model.contacts``): a
+viscoelastic contact law (:meth:`Chain.with_dissipation`), a static load
+(:meth:`Chain.with_precompression`), a striker in front of granule 1
+(:meth:`Chain.with_striker`), granules and a wall of other materials
+(``materials=`` of :func:`from_radii`, ``material=`` of :meth:`Chain.with_wall`).
+Without them a chain is the paper's, bit for bit.
+
 Units are the paper's rescaled ones (Sec. II): radii in units of the radius of
 the reference (first, large) granule, masses m = R^3 in units of its mass, time
-and displacement as in Eq. (motion_rescaled).
+and displacement as in Eq. (motion_rescaled). With several materials the
+reference is granule 1's material: m_k = (rho_k / rho_1) R_k^3 and the contact
+prefactors carry E*_k,k+1 / E*_1,1 (:func:`material_stiffness`).
 """
 
 from __future__ import annotations
@@ -26,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import count, exponent, finite_scalar, positive_array
-from .contacts import FreeEnd, Impulse, PowerLaw, RigidWall
+from .contacts import FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, RigidWall, Striker, Viscoelastic
 
 __all__ = [
     "Chain",
@@ -38,6 +48,8 @@ __all__ = [
     "sphere_mass",
     "sphere_stiffness",
     "wall_stiffness",
+    "material_stiffness",
+    "material_wall_stiffness",
 ]
 
 HERTZ = 2.5
@@ -73,15 +85,29 @@ class Chain:
         Radii the chain was built from (None for an effective chain); ``inf`` for a wall.
     kind : str
         A short description ("radii", "decorated", "effective", ...).
+    contact : PowerLaw or Viscoelastic, optional
+        The contact law (default ``PowerLaw(n)``, the paper's; its ``n`` must be ``n``).
+        :meth:`with_dissipation` sets a viscoelastic one.
+    static_force : float
+        The precompression F0 >= 0 (rescaled force units; 0: none, the paper's chain;
+        :meth:`with_precompression`, :class:`granchain.model.contacts.Precompression`).
+    striker : bool
+        Granule 0 of the arrays is a striker, the struck body in front of granule 1
+        (:meth:`with_striker`): not observed by default, and the granule labels
+        (``PulseResult.granule``) start at 1 with the granule after it.
 
     Attributes
     ----------
-    contact : granchain.model.contacts.PowerLaw
-        The contact law (exponent ``n``).
-    boundary : granchain.model.contacts.FreeEnd or granchain.model.contacts.RigidWall
-        The far end (a wall when the last mass is infinite).
-    initial : granchain.model.contacts.Impulse
-        The initial state: granule 1 struck with ``initial_velocity``, the rest at rest.
+    contact : granchain.model.contacts.PowerLaw or granchain.model.contacts.Viscoelastic
+        The contact law.
+    precompression : granchain.model.contacts.Precompression
+        The static load (force 0 without one).
+    boundary : FreeEnd, LoadedEnd or RigidWall (granchain.model.contacts)
+        The far end: a wall when the last mass is infinite; held by the static force
+        when the chain is precompressed without a wall; else free.
+    initial : granchain.model.contacts.Impulse or granchain.model.contacts.Striker
+        The initial state: granule 1 (or the striker) struck with ``initial_velocity``,
+        the rest at rest in the static state.
     """
 
     masses: np.ndarray
@@ -92,8 +118,11 @@ class Chain:
     radii: np.ndarray | None = None
     kind: str = "custom"
     meta: dict = field(default_factory=dict, repr=False)
-    contact: PowerLaw = field(init=False, repr=False)
-    boundary: FreeEnd | RigidWall = field(init=False, repr=False)
+    contact: PowerLaw | Viscoelastic | None = field(default=None, repr=False)
+    static_force: float = 0.0
+    striker: bool = False
+    precompression: Precompression = field(init=False, repr=False)
+    boundary: FreeEnd | LoadedEnd | RigidWall = field(init=False, repr=False)
     initial: Impulse = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -106,8 +135,17 @@ class Chain:
         n = exponent(self.n)
         v0 = finite_scalar("initial_velocity", self.initial_velocity, positive=True)
         wall = bool(np.isinf(m[-1]))
+        striker = bool(self.striker)
+        if striker and m.size - wall < 3:
+            raise ValueError("a chain with a striker needs the striker and at least 2 granules")
+        contact = PowerLaw(n) if self.contact is None else self.contact
+        if not isinstance(contact, (PowerLaw, Viscoelastic)):
+            raise ValueError(f"contact must be a granchain.PowerLaw or granchain.Viscoelastic law, got {contact!r}")
+        if contact.n != n:
+            raise ValueError(f"the contact law's exponent n = {contact.n:g} differs from the chain's n = {n:g}: give the same n")
+        load = self.static_force if isinstance(self.static_force, Precompression) else Precompression(self.static_force)
         if self.observed is None:
-            obs = np.arange(m.size - wall, dtype=np.int64)
+            obs = np.arange(int(striker), m.size - wall, dtype=np.int64)
         else:
             obs = np.asarray(self.observed)
             if obs.ndim != 1 or obs.size == 0 or not np.issubdtype(obs.dtype, np.integer):
@@ -129,9 +167,20 @@ class Chain:
         object.__setattr__(self, "initial_velocity", v0)
         object.__setattr__(self, "observed", _frozen(obs))
         object.__setattr__(self, "radii", None if radii is None else _frozen(radii))
-        object.__setattr__(self, "contact", PowerLaw(n))
-        object.__setattr__(self, "boundary", RigidWall(float(c[-1])) if wall else FreeEnd())
-        object.__setattr__(self, "initial", Impulse(v0))
+        object.__setattr__(self, "contact", contact)
+        object.__setattr__(self, "static_force", load.force)
+        object.__setattr__(self, "striker", striker)
+        object.__setattr__(self, "precompression", load)
+        if wall:
+            boundary = RigidWall(float(c[-1]))
+        else:
+            boundary = LoadedEnd(load.force) if load.force > 0 else FreeEnd()
+        object.__setattr__(self, "boundary", boundary)
+        if striker:
+            r0 = None if radii is None else float(radii[0])
+            object.__setattr__(self, "initial", Striker(v0, 0, float(m[0]), r0))
+        else:
+            object.__setattr__(self, "initial", Impulse(v0))
 
     # -- derived quantities -------------------------------------------------
     @property
@@ -145,6 +194,100 @@ class Chain:
         return self.boundary.wall
 
     @property
+    def labels(self) -> np.ndarray:
+        """The observed granules' 1-based labels: granule 1 is the first granule after the striker
+        (0 is the striker itself), else the first of the arrays."""
+        return self.observed + 1 - int(self.striker)
+
+    @property
+    def elastic(self) -> bool:
+        """The paper's chain: power-law contacts without damping or static load (a striker and
+        materials change masses and stiffnesses only)."""
+        return self.contact.gamma == 0.0 and self.static_force == 0.0
+
+    @property
+    def ends_at_exit(self) -> bool:
+        """Whether a run can end at the pulse's exit (or its return from a wall): not for a
+        precompressed chain, whose loaded contacts do not open (it runs to a time instead,
+        ``granchain.solve.simulation.default_t_max``)."""
+        return self.boundary.has_exit and self.static_force == 0.0
+
+    @property
+    def overlaps(self) -> np.ndarray:
+        """The static overlaps delta0_k = (F0 / c_k)^(1/(n-1)) (zeros without precompression)."""
+        return self.precompression.overlaps(self.stiffness, self.n)
+
+    def replace(self, **changes) -> "Chain":
+        """The same chain with some constructor arguments changed (a copy of ``meta``)."""
+        args = dict(masses=self.masses, stiffness=self.stiffness, n=self.n, initial_velocity=self.initial_velocity,
+                    observed=self.observed, radii=self.radii, kind=self.kind, meta=dict(self.meta),
+                    contact=self.contact, static_force=self.static_force, striker=self.striker)
+        args.update(changes)
+        return Chain(**args)
+
+    def with_precompression(self, force) -> "Chain":
+        """The same chain under a static compressive force F0 = ``force`` (rescaled force units; see
+        :class:`granchain.model.contacts.Precompression` for the boundary convention: the load at the
+        struck end, held at the far end by the wall if there is one, else by the same force).
+
+        ``force`` may be a quantity with units (``"2 N"``) only through ``granchain.units``
+        (:meth:`granchain.units.Scale.rescaled_force`), which knows the force unit."""
+        if self.n <= 1.0:
+            raise ValueError(f"precompression needs an exponent n > 1 (a contact that stiffens as it is compressed), got n = {self.n:g}")
+        return self.replace(static_force=Precompression(force))
+
+    def with_dissipation(self, gamma: float | None = None, *, restitution: float | None = None,
+                         speed: float = 1.0) -> "Chain":
+        """The same chain with viscoelastic contacts (:class:`granchain.model.contacts.Viscoelastic`):
+        give the damping time ``gamma``, or a coefficient of ``restitution`` in (0, 1] of two reference
+        granules colliding at ``speed`` (rescaled; 1 is the impact speed of the paper's units), from
+        which ``gamma`` is calibrated by solving the two-body problem."""
+        if (gamma is None) == (restitution is None):
+            raise ValueError("give either gamma (the damping time) or restitution (a coefficient of restitution, with speed)")
+        law = Viscoelastic(gamma, self.n) if gamma is not None else Viscoelastic.from_restitution(restitution, speed, n=self.n)
+        return self.replace(contact=law)
+
+    def with_striker(self, mass: float | None = None, *, radius: float | None = None, velocity: float | None = None,
+                     material=None) -> "Chain":
+        """The same chain struck by a free sphere instead of an initial velocity on granule 1.
+
+        Give the striker's ``mass`` (rescaled: granule 1's mass is 1) or its ``radius`` (rescaled),
+        and its ``velocity`` (default: this chain's ``initial_velocity``). The striker is a sphere of
+        granule 1's material (or of ``material``, a :class:`granchain.units.Material`, with
+        ``materials`` of the chain given in ``meta``): its contact with granule 1 follows Eq. (r-prime)
+        (Hertz, effective modulus and radius of the pair, :func:`material_stiffness`); of a ``mass``
+        alone, the radius is that of a sphere of that mass. It sits in front of granule 1, just
+        touching it (carrying the static load of a precompressed chain), and is launched at t = 0.
+        Granule labels keep their meaning (granule 1 is the first after the striker), and the
+        striker is not observed unless asked (:meth:`with_observed`, index 0)."""
+        if self.striker:
+            raise ValueError("this chain already has a striker")
+        if (mass is None) == (radius is None):
+            raise ValueError("give the striker's mass or its radius (rescaled: granule 1 has mass 1 and radius 1)")
+        mats = self.meta.get("materials")
+        ref = mats[0] if mats else None
+        smat = material if material is not None else ref
+        rho = 1.0 if smat is None or ref is None else smat.rho / ref.rho
+        if radius is not None:
+            r_s = finite_scalar("striker radius", radius, positive=True)
+            m_s = rho * r_s * r_s * r_s
+        else:
+            m_s = finite_scalar("striker mass", mass, positive=True)
+            r_s = (m_s / rho) ** (1.0 / 3.0)
+        r1 = 1.0 if self.radii is None else float(self.radii[0])
+        if smat is not None and ref is not None:
+            c_s = float(material_stiffness(np.array([r_s, r1]), [smat, mats[0]], reference=ref)[0])
+        else:
+            c_s = float(sphere_stiffness(np.array([r_s, r1]))[0])
+        v = self.initial_velocity if velocity is None else finite_scalar("striker velocity", velocity, positive=True)
+        radii = None if self.radii is None else np.concatenate(([r_s], self.radii))
+        meta = dict(self.meta)
+        if mats:
+            meta["materials"] = [smat] + list(mats)
+        return self.replace(masses=np.concatenate(([m_s], self.masses)), stiffness=np.concatenate(([c_s], self.stiffness)),
+                            initial_velocity=v, observed=self.observed + 1, radii=radii, meta=meta, striker=True)
+
+    @property
     def energy(self) -> float:
         """Total energy, all kinetic at t = 0: m_1 v_1^2 / 2 (a wall, at rest, has none)."""
         return self.initial.energy(self.masses)
@@ -155,15 +298,34 @@ class Chain:
         granules lose the wall's impulse, :attr:`granchain.PulseResult.wall_impulse`)."""
         return self.initial.momentum(self.masses)
 
-    def with_wall(self, stiffness: float | None = None) -> "Chain":
-        """The same chain ending in a rigid wall: one more granule, of infinite mass.
+    def with_wall(self, stiffness: float | None = None, *, material=None) -> "Chain":
+        """The same chain ending in a wall: one more granule, of infinite mass (it does not move).
 
         The wall contact's stiffness is ``stiffness`` or, for a chain built from radii,
-        sqrt(2 R_M) (:func:`wall_stiffness`, the limit of Eq. r-prime). A chain without
+        sqrt(2 R_M) (:func:`wall_stiffness`, the limit of Eq. r-prime: a flat wall of the last
+        granule's material). ``material`` (a :class:`granchain.units.Material`, or ``"rigid"`` for an
+        infinitely stiff wall) makes it an elastic wall of its own material: Hertz's effective
+        modulus of the pair and the sphere's radius (:func:`material_wall_stiffness`). A chain without
         radii (e.g. an effective chain) needs ``stiffness``.
         """
         if self.wall:
             raise ValueError("this chain already ends in a wall")
+        if stiffness is not None and material is not None:
+            raise ValueError("give the wall's stiffness or its material, not both")
+        if material is not None:
+            if self.radii is None:
+                raise ValueError(f"a {self.kind} chain has no radii to give an elastic wall its contact: pass stiffness=...")
+            mats = self.meta.get("materials")
+            from ..units import STEEL
+
+            ref = mats[0] if mats else None
+            last = mats[-1] if mats else None
+            if ref is None:  # one material, unnamed: the wall's modulus relative to the granules' own
+                ref = last = self.meta.get("material", STEEL)
+            stiffness = material_wall_stiffness(self.radii[-1], last, material, reference=ref)
+        elif stiffness is None and self.meta.get("materials") and self.radii is not None:
+            mats = self.meta["materials"]  # a flat wall of the last granule's material, relative to granule 1's
+            stiffness = material_wall_stiffness(self.radii[-1], mats[-1], mats[-1], reference=mats[0])
         if stiffness is None:
             if self.radii is None:
                 raise ValueError(f"a {self.kind} chain has no radii to give the wall contact its stiffness sqrt(2 R_M): "
@@ -171,17 +333,31 @@ class Chain:
             stiffness = wall_stiffness(self.radii[-1])
         c_wall = finite_scalar("stiffness", stiffness, positive=True)
         radii = None if self.radii is None else np.append(self.radii, np.inf)
-        return Chain(np.append(self.masses, np.inf), np.append(self.stiffness, c_wall), self.n, self.initial_velocity,
-                     self.observed, radii, self.kind, dict(self.meta))
+        meta = dict(self.meta)
+        if material is not None:
+            meta["wall_material"] = material
+        return self.replace(masses=np.append(self.masses, np.inf), stiffness=np.append(self.stiffness, c_wall), radii=radii,
+                            meta=meta)
 
     def with_observed(self, observed) -> "Chain":
-        """The same chain observing other granules (0-based indices)."""
-        return Chain(self.masses, self.stiffness, self.n, self.initial_velocity, observed, self.radii, self.kind, dict(self.meta))
+        """The same chain observing other granules (0-based indices of the arrays; a striker is 0)."""
+        return self.replace(observed=observed)
+
+    def describe_model(self) -> dict:
+        """The chain's contact law, static load and initial state as a record (for stores and reports)."""
+        return {**self.contact.describe(), **self.precompression.describe(), **self.initial.describe()}
 
     def __repr__(self) -> str:
+        extras = ""
+        if self.contact.gamma > 0:
+            extras += f", viscoelastic gamma={self.contact.gamma:.6g}"
+        if self.static_force > 0:
+            extras += f", static_force={self.static_force:.6g}"
+        if self.striker:
+            extras += f", striker of mass {self.masses[0]:.6g}"
         return (
             f"Chain(kind={self.kind!r}, M={self.size}{' (the last a wall)' if self.wall else ''}, n={self.n:g}, "
-            f"initial_velocity={self.initial_velocity:g}, observed={self.observed.size} granules)"
+            f"initial_velocity={self.initial_velocity:g}, observed={self.observed.size} granules{extras})"
         )
 
 
@@ -217,6 +393,54 @@ def wall_stiffness(radius) -> np.ndarray:
     return np.sqrt(2.0 * np.asarray(radius, dtype=float))  # Eq. (r-prime), R_{k+1} -> inf
 
 
+def _material(m):
+    from ..units import Material, get_material
+
+    if isinstance(m, Material):
+        return m
+    if isinstance(m, str):
+        return get_material(m)
+    raise ValueError(f"a material must be a granchain.units.Material or a preset name (steel, stainless-steel, brass, "
+                     f"aluminium, glass, ptfe), got {m!r}")
+
+
+def _pair_modulus(a, b) -> float:
+    """Hertz's effective modulus of two spheres (or a sphere and a flat) of materials a and b:
+    1/E* = (1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b (K. L. Johnson, *Contact Mechanics*, Sec. 4.2); b may be
+    ``"rigid"`` (E_b infinite)."""
+    if isinstance(b, str) and b == "rigid":
+        return a.E / (1.0 - a.nu**2)
+    return 1.0 / ((1.0 - a.nu**2) / a.E + (1.0 - b.nu**2) / b.E)
+
+
+def material_stiffness(radii, materials, *, reference=None) -> np.ndarray:
+    """Contact prefactors of neighbouring spheres of several materials, in the rescaled units of
+    ``reference`` (default: the first granule's material):
+
+        c_k = (E*_k,k+1 / E*_ref) sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})),
+
+    Hertz's force (4/3) E* R_eff^(1/2) delta^(3/2) with the pair's effective modulus E* and radius
+    R_eff (K. L. Johnson, *Contact Mechanics*, Sec. 4.2) divided by the reference pair's, so that
+    one material gives Eq. (r-prime) bit for bit (the ratio is then exactly 1)."""
+    r = np.asarray(radii, dtype=float)
+    mats = [_material(m) for m in materials]
+    ref = mats[0] if reference is None else _material(reference)
+    e_ref = _pair_modulus(ref, ref)
+    ratio = np.array([1.0 if (a == ref and b == ref) else _pair_modulus(a, b) / e_ref for a, b in zip(mats[:-1], mats[1:])])
+    return ratio * sphere_stiffness(r)
+
+
+def material_wall_stiffness(radius, material, wall_material, *, reference) -> float:
+    """Contact prefactor of a sphere of ``radius`` and ``material`` against a flat wall of
+    ``wall_material`` (a Material, or ``"rigid"``): (E*_sphere,wall / E*_ref) sqrt(2 R), the
+    limit R_wall -> infinity of :func:`material_stiffness` (:func:`wall_stiffness` when all are
+    one material)."""
+    a, ref = _material(material), _material(reference)
+    b = wall_material if (isinstance(wall_material, str) and wall_material == "rigid") else _material(wall_material)
+    ratio = 1.0 if (a == ref and b == ref) else _pair_modulus(a, b) / _pair_modulus(ref, ref)
+    return float(ratio * wall_stiffness(radius))
+
+
 def sphere_mass(radii: np.ndarray) -> np.ndarray:
     """m = R^3 (equal density, paper Sec. II), written as a product so that arrays of any
     shape (one chain or a batch of chains) give bitwise the same masses."""
@@ -234,18 +458,38 @@ def sphere_stiffness(radii: np.ndarray) -> np.ndarray:
 
 
 def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observed=None, kind: str = "radii",
-               wall: bool = False) -> Chain:
-    """A chain of spheres of one material from any list of radii.
+               wall: bool = False, materials=None, wall_material=None) -> Chain:
+    """A chain of spheres from any list of radii.
 
-    m_k = R_k^3 (paper Sec. II: M_k = M_1 m_k with equal density), stiffness from
-    Eq. (r-prime). All granules are observed unless ``observed`` says otherwise.
-    ``wall=True`` ends the chain in a rigid wall (:meth:`Chain.with_wall`).
+    One material (the default): m_k = R_k^3 (paper Sec. II: M_k = M_1 m_k with equal density),
+    stiffness from Eq. (r-prime). ``materials``: one :class:`granchain.units.Material` (or preset
+    name) per granule, e.g. a steel-PTFE dimer chain: m_k = (rho_k / rho_1) R_k^3 and the stiffness
+    of each pair from Hertz's effective modulus and radius (:func:`material_stiffness`), in the
+    rescaled units of granule 1's material (``granchain.units.scale`` of that material). All granules
+    are observed unless ``observed`` says otherwise. ``wall=True`` ends the chain in a wall
+    (:meth:`Chain.with_wall`): of the last granule's material, or of ``wall_material`` (a Material
+    or ``"rigid"``).
     """
     r = positive_array("radii", radii, min_size=1)
     if r.size < 2:
         raise ValueError(f"a chain needs at least 2 granules, got {r.size} radius")
-    chain = Chain(sphere_mass(r), sphere_stiffness(r), n, initial_velocity, observed, r, kind)
-    return chain.with_wall() if wall else chain
+    if materials is None:
+        if wall_material is not None:
+            raise ValueError("wall_material needs the granules' materials=... (the wall's stiffness is relative to theirs)")
+        chain = Chain(sphere_mass(r), sphere_stiffness(r), n, initial_velocity, observed, r, kind)
+        return chain.with_wall() if wall else chain
+    if n != HERTZ:
+        raise ValueError(f"materials give Hertz contacts (n = 5/2); got n = {n:g}")
+    mats = [_material(materials)] * r.size if not isinstance(materials, (list, tuple, np.ndarray)) else [_material(m) for m in materials]
+    if len(mats) != r.size:
+        raise ValueError(f"materials needs one material per granule ({r.size}), got {len(mats)}")
+    ref = mats[0]
+    rho = np.array([1.0 if m == ref else m.rho / ref.rho for m in mats])
+    chain = Chain(rho * sphere_mass(r), material_stiffness(r, mats), n, initial_velocity, observed, r, kind,
+                  {"materials": mats})
+    if wall or wall_material is not None:
+        return chain.with_wall(material=wall_material) if wall_material is not None else chain.with_wall()
+    return chain
 
 
 def monodisperse(size: int, *, n: float = HERTZ, initial_velocity: float = 1.0, wall: bool = False) -> Chain:

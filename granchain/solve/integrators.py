@@ -101,22 +101,23 @@ class Integrator:
         """Called with the chains (rows) before every integration: warn or refuse where the method
         cannot work (e.g. a fixed step beyond its stability limit). Nothing by default."""
 
-    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls):
+    def integrate(self, chain, x, v, *, t_grid, t_max, stop_at_exit, controls: RunControls, sensed=None):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state), on this
         integrator's backend.
 
-        Returns (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f): the status code, the
-        run's ``info`` (slots ``INFO_*`` of ``granchain.backends.kernels.records``), per observed granule
-        its peak velocity and time and its velocities on ``t_grid`` (time-major), per contact (M - 1)
-        its peak force and time, and the wall force on the grid (zeros without a wall).
+        Returns (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c): the status code,
+        the run's ``info`` (slots ``INFO_*`` of ``granchain.backends.kernels.records``), per observed
+        granule its peak velocity and time and its velocities on ``t_grid`` (time-major), per contact
+        (M - 1) its peak force and time, the wall force on the grid (zeros without a wall), and the forces
+        of the contacts ``sensed`` (0-based) on the grid (T, S).
         """
         from ..backends import get_backend
 
         return get_backend(self.backend).integrate(self, chain, x, v, t_grid=t_grid, t_max=t_max,
-                                                   stop_at_exit=stop_at_exit, controls=controls)
+                                                   stop_at_exit=stop_at_exit, controls=controls, sensed=sensed)
 
     def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls: RunControls, scale: float, out: dict) -> None:
+                        controls: RunControls, scale: float, out: dict, model: dict | None = None) -> None:
         """Integrate a batch of chains (rows of ``masses`` (R, M), ``stiffness`` (R, M-1),
         ``initial_velocity`` (R,), shared ``observed`` and recorded ``contacts``, 0-based),
         stopping at the pulse's exit (or its return from a wall), on this integrator's backend.
@@ -128,12 +129,16 @@ class Integrator:
         sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) (and of
         the wall force to ``["sum_wall"]`` (T,)) and counts them in ``["n_valid"]`` (1,). With
         ``out["lags"]`` (L,), also adds the aligned pulse's sums to ``["sum_a"]``/``["sum_a2"]``
-        (L, K) (``granchain.backends.kernels.aligned``).
+        (L, K) (``granchain.backends.kernels.aligned``). ``model``: what the rows share besides their
+        arrays, as keywords of :class:`granchain.Chain` (``contact``, ``static_force``, ``striker``;
+        None: the paper's elastic, unloaded chain struck on granule 1). A precompressed batch runs to
+        ``t_max`` (its contacts never open), the others stop at the pulse's exit.
         """
         from ..backends import get_backend
 
         get_backend(self.backend).integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts,
-                                                  t_grid=t_grid, t_max=t_max, controls=controls, scale=scale, out=out)
+                                                  t_grid=t_grid, t_max=t_max, controls=controls, scale=scale, out=out,
+                                                  model=model)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from .._validate import finite_scalar
 from ..backends import integrator_as_run
 from ..backends.kernels.forces import final_energy, total_momentum
 from ..backends.kernels.records import (
+    INFO_DISSIPATED,
     INFO_EVALUATIONS,
     INFO_EXIT,
     INFO_REJECTED,
@@ -20,6 +21,7 @@ from ..backends.kernels.records import (
 )
 from ..model.chain import Chain
 from ..units import rescaled_attrs
+from ..backends import numba_backend
 from .integrators import RunControls, get_integrator
 
 __all__ = ["Status", "PulseResult", "simulate", "default_t_max"]
@@ -48,6 +50,15 @@ class PulseResult:
     the granules that left it keep the velocity they left with and their positions are continued
     ballistically (they may overlap: ``energy_error`` is computed from the energies they had when
     they left, see ``granchain.DP5``).
+
+    Real contacts (``granchain.model.contacts``): ``dissipated_energy`` is the energy a viscoelastic
+    law took (integrated with the motion), and ``energy_error`` is then (E_end + E_dissipated - E_0)/E_0.
+    For a precompressed chain (``static_force`` F0 > 0) positions are displacements from the static
+    state, forces (``peak_force``, ``wall_force``, ``sensor_force``) are total forces, static load
+    included (what a gauge measures), and :attr:`peak_dynamic_force` is the peak less F0.
+    ``sensor_granule``/``sensor_force`` (sensor, time): the force inside each sensor granule on
+    ``t_grid``, the mean of its two contact forces (the embedded-gauge experiments' measure, e.g.
+    C. Daraio et al., Phys. Rev. E 73, 026610 (2006)); :meth:`sensor_peak` its maximum.
     """
 
     chain: Chain
@@ -76,6 +87,59 @@ class PulseResult:
     #: The integrator as it ran on this chain (``describe()``), with ``"goal_control"`` saying why
     #: when the chain's boundary switched its relaxed zone and trailing window off (a rigid wall).
     integrator_record: dict | None = None
+    dissipated_energy: float = 0.0
+    sensor_granule: np.ndarray | None = None
+    sensor_force: np.ndarray | None = None
+
+    @property
+    def static_force(self) -> float:
+        """The chain's precompression F0 (0 without)."""
+        return self.chain.static_force
+
+    @property
+    def peak_dynamic_force(self) -> np.ndarray | None:
+        """Per contact, the peak force less the static load F0 (``peak_force`` without precompression)."""
+        return None if self.peak_force is None else self.peak_force - self.chain.static_force
+
+    def sensor_peak(self) -> tuple[np.ndarray, np.ndarray]:
+        """(peak force, its time) of each sensor granule's force (:attr:`sensor_force`), the grid sample
+        of the maximum refined by the parabola through it and its two neighbours (exact for a smooth
+        peak to O(dt^3)): the quantity the embedded-gauge experiments report."""
+        if self.sensor_force is None:
+            raise ValueError("no sensor was recorded: simulate(..., t_grid=..., sensors=[k, ...])")
+        t = self.t_grid
+        peaks, times = [], []
+        for f in self.sensor_force:
+            i = int(np.nanargmax(f))
+            if 0 < i < f.size - 1 and np.isfinite(f[i - 1:i + 2]).all():
+                den = f[i - 1] - 2.0 * f[i] + f[i + 1]
+                u = 0.5 * (f[i - 1] - f[i + 1]) / den if den < 0 else 0.0
+                dt = t[i + 1] - t[i] if u >= 0 else t[i] - t[i - 1]
+                peaks.append(f[i] - 0.25 * (f[i - 1] - f[i + 1]) * u)
+                times.append(t[i] + u * dt)
+            else:
+                peaks.append(f[i])
+                times.append(t[i])
+        return np.array(peaks), np.array(times)
+
+    def wave_speed(self, first: int | None = None, last: int | None = None) -> float:
+        """The pulse's speed in granules per unit time: the inverse slope of the least-squares line
+        through the observed granules' peak times against their labels, over the labels first..last
+        (default: the middle half of the observed granules, away from the struck end where the pulse
+        forms and from the far end where it is reflected). Multiply by the granule spacing in metres
+        over the time unit (``granchain.units.Scale``) for m/s."""
+        labels = np.asarray(self.granule, dtype=float)
+        if first is None and last is None:
+            k = labels.size
+            sel = np.arange(k // 4, max(k // 4 + 2, 3 * k // 4))
+        else:
+            lo = labels[0] if first is None else first
+            hi = labels[-1] if last is None else last
+            sel = np.flatnonzero((labels >= lo) & (labels <= hi))
+        if sel.size < 2:
+            raise ValueError("the wave speed needs at least two observed granules in the range")
+        slope = np.polyfit(labels[sel], self.peak_time[sel], 1)[0]
+        return float(1.0 / slope)
 
     @property
     def ok(self) -> bool:
@@ -99,6 +163,8 @@ class PulseResult:
             f"# {self.chain.kind} chain, M = {self.chain.size}, n = {self.chain.n:g}, integrator {self.integrator}: "
             f"{self.status.name} ({self.message}); t_end = {self.t_end:.4g}, steps = {self.n_steps} "
             f"(+{self.n_rejected} rejected), energy error {self.energy_error:.2e}, "
+            + (f"dissipated {self.dissipated_energy:.6g}, " if self.chain.contact.gamma > 0 else "")
+            + (f"static force {self.chain.static_force:.6g}, " if self.chain.static_force > 0 else "")
             + (f"momentum error {self.momentum_error:.2e}" if not self.chain.wall else
                f"wall: peak force {self.peak_wall_force:.9g} at t = {self.peak_wall_force_time:.6f}, impulse {self.wall_impulse:.9g}")
         )
@@ -120,8 +186,11 @@ class PulseResult:
                 "status": int(self.status), "status_message": self.message, "integrator": self.integrator,
                 "energy_error": self.energy_error, "momentum_error": self.momentum_error,
                 "n_steps": self.n_steps, "t_end": self.t_end, "chain_kind": self.chain.kind, "n": self.chain.n,
+                "contact_model": json.dumps(self.chain.describe_model(), sort_keys=True),
+                "dissipated_energy": self.dissipated_energy, "static_force": self.chain.static_force,
             },
         )
+        ds.attrs["dissipated_energy_units"] = rescaled_attrs("energy")["units"]
         if self.integrator_record is not None:
             ds.attrs["integrator_record"] = json.dumps(self.integrator_record, sort_keys=True)
         if self.velocity is not None:
@@ -134,6 +203,10 @@ class PulseResult:
             last = "; the last is the wall contact" if self.chain.wall else ""
             ds = ds.assign_coords(contact=("contact", np.arange(1, self.peak_force.size + 1),
                                            {"long_name": f"contact j between granules j and j+1 (1-based){last}", "units": "1"}))
+        if self.sensor_force is not None:
+            ds["sensor_force"] = (("sensor", "time"), self.sensor_force,
+                                  {**rescaled_attrs("force"), "long_name": "force inside the sensor granule (mean of its two contact forces)"})
+            ds = ds.assign_coords(sensor=("sensor", self.sensor_granule, {"long_name": "sensor granule (1-based label)", "units": "1"}))
         if self.chain.wall:
             ds.attrs.update(peak_wall_force=self.peak_wall_force, peak_wall_force_time=self.peak_wall_force_time,
                             wall_impulse=self.wall_impulse)
@@ -146,8 +219,29 @@ def default_t_max(chain: Chain) -> float:
     """A generous time limit: a pulse in any sensible chain crosses a granule in a few time units.
 
     (Monodisperse: ~1.2 time units per granule; decorated random chains: ~2.4 per large granule.)
+    A precompressed chain runs to this time (its contacts never open, so there is no exit to stop
+    at): the pulse is faster than linear waves (its solitary wave's speed exceeds the sound speed,
+    Nesterenko 2001, Sec. 1.3), so twice the time a linear wave takes to cross the chain
+    (:func:`linear_crossing_time`), plus 20, bounds its crossing; the run ends at the smaller of
+    the two limits.
     """
-    return time_limit(chain.size, chain.initial_velocity, chain.n)
+    limit = time_limit(chain.size, chain.initial_velocity, chain.n)
+    if chain.static_force > 0:
+        limit = min(limit, 2.0 * float(linear_crossing_time(chain.masses, chain.stiffness, chain.n, chain.static_force)) + 20.0)
+    return limit
+
+
+def linear_crossing_time(masses, stiffness, n: float, static_force: float):
+    """The time a linear wave takes to cross a chain precompressed by ``static_force``: the sum over its
+    contacts of sqrt(m / k0), k0 = (n-1) c delta0^(n-2) the contact's linear stiffness and m the heavier
+    of its two granules (the slower local speed; monodisperse: N / c0, c0 the sound speed). Works on
+    batches (rows of ``masses``, ``stiffness``); a wall (infinite mass) is not crossed."""
+    m = np.asarray(masses, dtype=float)
+    c = np.asarray(stiffness, dtype=float)
+    d0 = (static_force / c) ** (1.0 / (n - 1.0))
+    k0 = (n - 1.0) * c * d0 ** (n - 2.0)
+    heavier = np.maximum(m[..., :-1], m[..., 1:])
+    return np.sum(np.where(np.isfinite(heavier), np.sqrt(heavier / k0), 0.0), axis=-1)
 
 
 def time_limit(size: int, initial_velocity: float, n: float) -> float:
@@ -155,7 +249,7 @@ def time_limit(size: int, initial_velocity: float, n: float) -> float:
     return 100.0 + 20.0 * size / max(initial_velocity, 1e-3) ** (1.0 - 2.0 / max(n, 2.0))
 
 
-def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None = None, stop: str = "exit", exit_margin: float = 3.0, max_steps: int = 20_000_000, peak_rtol: float = 1e-6) -> PulseResult:
+def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None = None, stop: str = "exit", exit_margin: float = 3.0, max_steps: int = 20_000_000, peak_rtol: float = 1e-6, sensors=None) -> PulseResult:
     """Integrate Eq. (motion_rescaled) for one chain struck at granule 1.
 
     Parameters
@@ -175,7 +269,14 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         than every other one) or, for a chain ending in a wall, after the pulse
         has come back from the wall (wall contact open and the granule next to it
         moving away, without a break for ``exit_margin``), and not before
-        ``t_grid[-1]``; "t_max" integrates to exactly ``t_max``.
+        ``t_grid[-1]``; "t_max" integrates to exactly ``t_max``. A precompressed chain has no exit
+        (its loaded contacts do not open): it always runs to ``t_max`` (default: twice the linear
+        crossing time, :func:`default_t_max`).
+    sensors : sequence of int, optional
+        1-based labels of sensor granules (granule 1 is the first after a striker): the force inside
+        each, the mean of its two contact forces, is recorded on ``t_grid`` (``sensor_force``).
+        A sensor needs a contact on each side (not granule 1 of a chain struck on it, not a free last
+        granule).
     peak_rtol : float
         Tie rule for the peak: a later local maximum replaces the recorded one
         only if higher by more than this relative amount (keep it above the
@@ -196,25 +297,27 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         if stop == "t_max" and grid[-1] > t_max:
             raise ValueError(f"t_grid ends at {grid[-1]:g}, beyond t_max = {t_max:g}")
         t_max = max(t_max, float(grid[-1]))
+    sensor_labels, sensed = _sensor_contacts(chain, sensors, grid)
     x = np.zeros(chain.size)
     v = np.zeros(chain.size)
     v[0] = chain.initial_velocity
-    status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = integ.integrate(
-        chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit"), controls=controls
-    )
+    status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = integ.integrate(
+        chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit" and chain.ends_at_exit), controls=controls,
+        sensed=sensed)
     if status != Status.SUCCESS:
         import warnings
 
         warnings.warn(f"simulate: the integration did not succeed: {Status(status).name} ({Status(status).message}); "
                       "check result.status before using the peaks", RuntimeWarning, stacklevel=2)
     e0, p0 = chain.energy, chain.momentum
-    e1 = final_energy(x, v, chain.masses, chain.stiffness, chain.n, info)
+    dissipated = float(info[INFO_DISSIPATED])
+    e1 = final_energy(x, v, chain.masses, chain.stiffness, numba_backend.model_params(chain), info) + dissipated
     p1 = total_momentum(v, chain.masses)
     wall = chain.wall
     return PulseResult(
         chain=chain,
         integrator=integ.name,
-        granule=chain.observed + 1,
+        granule=chain.labels,
         peak_velocity=peak_v,
         peak_time=peak_t,
         status=Status(status),
@@ -236,4 +339,30 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         peak_wall_force_time=float(peak_ft[-1]) if wall else None,
         wall_impulse=float(p0 - p1) if wall else None,
         integrator_record=integrator_as_run(integ, chain),
+        dissipated_energy=dissipated,
+        sensor_granule=sensor_labels,
+        sensor_force=None if sensor_labels is None else 0.5 * (grid_c[:, 0::2] + grid_c[:, 1::2]).T.copy(),
     )
+
+
+def _sensor_contacts(chain: Chain, sensors, grid):
+    """(labels, contacts): the sensor granules' 1-based labels and their two contacts each (0-based,
+    left then right), checked."""
+    if sensors is None:
+        return None, None
+    labels = np.atleast_1d(np.asarray(sensors))
+    if labels.ndim != 1 or labels.size == 0 or not np.issubdtype(labels.dtype, np.integer):
+        raise ValueError(f"sensors must be a non-empty list of 1-based granule labels, got {sensors!r}")
+    if grid.size == 0:
+        raise ValueError("a sensor's force is recorded on a time grid: pass t_grid=... with sensors=...")
+    idx = labels.astype(np.int64) - 1 + int(chain.striker)  # array index of each sensor granule
+    last = chain.size - 1 - int(chain.wall)  # the last granule that moves
+    bad = (idx < 1) | (idx > last) | ((idx == last) & (not chain.wall))
+    if bad.any():
+        k = int(labels[np.flatnonzero(bad)[0]])
+        raise ValueError(f"sensor granule {k} has no contact on one side (or is not in the chain): a sensor measures "
+                         f"the mean of its two contact forces; choose labels in 2..{last - int(chain.striker) + (1 if chain.wall else 0)}")
+    contacts = np.empty(2 * idx.size, dtype=np.int64)
+    contacts[0::2] = idx - 1
+    contacts[1::2] = idx
+    return labels.astype(np.int64), contacts

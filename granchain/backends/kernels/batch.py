@@ -23,6 +23,7 @@ from .dispatch import integrate_chain
 from .forces import final_energy, impulse_energy
 from .jit import JIT, JIT_PARALLEL
 from .records import (
+    INFO_DISSIPATED,
     INFO_SIZE,
     INFO_STEPS,
     INFO_T_END,
@@ -88,11 +89,12 @@ def thread_sums(n_threads, T, K, L):
 def integrate_batch(batch, method, run, tally, rows, sums, partials):
     """Integrate realisations r = 0..R-1 (rows of ``batch``, ``records.Batch``: each struck at granule 1
     with its ``initial_velocity``) with ``method``, recording what ``run`` asks (its ``t_max``,
-    ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``; the run always stops at the
-    pulse's exit).
+    ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``; the run stops at the
+    pulse's exit with ``run.stop_at_exit``, else, successfully, at ``t_max``: a precompressed chain,
+    whose contacts never open).
 
     Per realisation writes (``rows``, ``records.Rows``) peak_v[r, :], peak_t[r, :], status[r],
-    energy_error[r] ((E_end - E_0)/E_0), n_steps[r], t_end[r], the peak forces of the contacts
+    energy_error[r] ((E_end + E_dissipated - E_0)/E_0), n_steps[r], t_end[r], the peak forces of the contacts
     ``tally.contacts`` (0-based) into peak_f[r, :], peak_ft[r, :] and, for chains ending in a wall, the
     wall's peak force and time into peak_wall[r, :] (untouched otherwise). Adds (``sums``,
     ``records.Sums``) round(v * scale) and round(v^2 * scale) of every successful realisation's
@@ -107,13 +109,13 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
     # Rebuilt by a call: Numba's parallel lowering passes a named tuple into the loop body only when
     # it finds the call (or argument) that made it, not a field read (batch.params).
     params = Params(*batch.params)
-    wall, n = params.wall, params.n
+    wall = params.wall
     obs, t_grid = run.observed, run.t_grid
     contacts, scale, lags = tally
     peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end = rows
     sum_v, sum_v2, sum_wall, n_valid, sum_a, sum_a2 = sums
     acc1, acc2, accw, cnt, al1, al2 = partials
-    exit_run = Run(obs, t_grid, run.t_max, True, run.exit_margin, run.max_steps, run.peak_rtol)
+    exit_run = Run(obs, t_grid, run.t_max, run.stop_at_exit, run.exit_margin, run.max_steps, run.peak_rtol, run.contacts)
     R, M = masses.shape
     K = obs.shape[0]
     T = t_grid.shape[0]
@@ -131,14 +133,15 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
         pft = np.zeros(M - 1)
         grid_f = np.zeros(T)
         info = np.zeros(INFO_SIZE)
+        grid_c = np.zeros((T, run.contacts.shape[0]))
         st = integrate_chain(method, Model(m, c, params), exit_run, State(x, v),
-                             Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info))
+                             Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
         gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
         status[r] = st
         n_steps[r] = np.int64(info[INFO_STEPS])
         t_end[r] = info[INFO_T_END]
         e0 = impulse_energy(m[0], v_init[r])
-        e1 = final_energy(x, v, m, c, n, info)
+        e1 = final_energy(x, v, m, c, params, info) + info[INFO_DISSIPATED]
         energy_error[r] = (e1 - e0) / e0
         if st == SUCCESS:
             cnt[tid] += 1

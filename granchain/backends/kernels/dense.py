@@ -17,7 +17,7 @@ from __future__ import annotations
 from numba import njit
 
 from . import dp5, rkn4
-from .forces import contact_force
+from .forces import force_rate, law_force
 from .jit import JIT, JIT_INLINE
 from .records import KIND_RKN4
 
@@ -25,6 +25,8 @@ from .records import KIND_RKN4
 #: maximum) or the relative velocity of a contact (its compression, i.e. force, maximum).
 ROOT_ACCELERATION = 0
 ROOT_APPROACH = 1
+#: ... or the rate of a viscoelastic contact's force, which peaks before its compression does.
+ROOT_FORCE_RATE = 2
 
 
 @njit(**JIT)
@@ -55,31 +57,50 @@ def dense_compression(j, x, Kx, h, Q):
 
 
 @njit(**JIT)
+def dense_force(j, step, fm, Q, Qv):
+    """The force of contact j by the chain's law (``forces.law_force``: its static overlap included, and
+    its rate of compression for a viscoelastic law) from the dense output of ``step``
+    (``records.Dense``) at the time whose weights ``Q``, ``Qv`` hold (:func:`weights` already called)."""
+    x, v, Kx, Kv, h = step
+    c, _, p, o, _ = fm
+    d = o[j] + dense_compression(j, x, Kx, h, Q)
+    w = 0.0
+    if p.gamma > 0.0:
+        w = dense_value(v[j], Kv, j, h, Qv) - dense_value(v[j + 1], Kv, j + 1, h, Qv)
+    return law_force(d, w, c[j], p)
+
+
+@njit(**JIT)
 def dense_acceleration(method, theta, k, step, fm, Q, Qv):
-    """Acceleration of granule k at t + theta h from the dense-output positions of ``step``
-    (``records.Dense``), forces from ``fm`` (``records.Forces``)."""
-    x, _, Kx, _, h = step
-    c, inv_m, p = fm
-    M = x.shape[0]
+    """Acceleration of granule k at t + theta h from the dense output of ``step`` (``records.Dense``),
+    forces from ``fm`` (``records.Forces``; the dynamic forces of ``forces.accelerations``)."""
+    _, inv_m, _, _, f0 = fm
+    M = step.x.shape[0]
     weights(method, theta, Q, Qv)
-    xk = dense_value(x[k], Kx, k, h, Q)
     left = 0.0
     right = 0.0
     if k > 0:
-        left = contact_force(dense_value(x[k - 1], Kx, k - 1, h, Q) - xk, c[k - 1], p)
+        left = dense_force(k - 1, step, fm, Q, Qv) - f0[k - 1]
     if k < M - 1:
-        right = contact_force(xk - dense_value(x[k + 1], Kx, k + 1, h, Q), c[k], p)
+        right = dense_force(k, step, fm, Q, Qv) - f0[k]
     return (left - right) * inv_m[k]
 
 
 @njit(**JIT)
 def root_function(method, what, i, theta, step, fm, Q, Qv):
     """The followed function at t + theta h on the dense output (weights ``Q`` for positions, ``Qv``
-    for velocities, see :func:`weights`): the acceleration of granule i, or the relative velocity
-    v_i - v_{i+1} of contact i."""
+    for velocities, see :func:`weights`): the acceleration of granule i, the relative velocity
+    v_i - v_{i+1} of contact i, or the rate of contact i's force (``forces.force_rate``)."""
     if what == ROOT_ACCELERATION:
         return dense_acceleration(method, theta, i, step, fm, Q, Qv)
-    _, v, _, Kv, h = step
+    x, v, Kx, Kv, h = step
+    if what == ROOT_FORCE_RATE:
+        dw = (dense_acceleration(method, theta, i, step, fm, Q, Qv)
+              - dense_acceleration(method, theta, i + 1, step, fm, Q, Qv))
+        c, _, p, o, _ = fm
+        d = o[i] + dense_compression(i, x, Kx, h, Q)
+        w = dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
+        return force_rate(d, w, dw, c[i], p)
     weights(method, theta, Q, Qv)
     return dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
 

@@ -61,37 +61,47 @@ E1, E3, E4, E5, E6, E7 = E[0], E[2], E[3], E[4], E[5], E[6]
 
 
 @njit(**JIT_INLINE)
-def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F):
+def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F, Pd):
     """Stages 2..7 of one step over granules 0..hi-1, unrolled.
 
-    Kx[s] are the stage velocities (dx/dt), Kv[s] the stage accelerations;
-    ``fm``: the forces' parameters (``records.Forces``). On return xs, vs hold the 5th-order solution and Kx[6], Kv[6] its derivative.
+    Kx[s] are the stage velocities (dx/dt), Kv[s] the stage accelerations, Pd[s] the power the
+    contacts dissipate at the stage (0 for elastic contacts; a viscoelastic force reads the stage
+    velocities Kx[s]); ``fm``: the forces' parameters (``records.Forces``). On return xs, vs hold the
+    5th-order solution and Kx[6], Kv[6], Pd[6] its derivative.
     """
     for i in range(hi):
         xs[i] = x[i] + h * (A21 * Kx[0, i])
         Kx[1, i] = v[i] + h * (A21 * Kv[0, i])
-    accelerations(xs, fm, hi, F, Kv[1])
+    Pd[1] = accelerations(xs, Kx[1], fm, hi, F, Kv[1])
     for i in range(hi):
         xs[i] = x[i] + h * (A31 * Kx[0, i] + A32 * Kx[1, i])
         Kx[2, i] = v[i] + h * (A31 * Kv[0, i] + A32 * Kv[1, i])
-    accelerations(xs, fm, hi, F, Kv[2])
+    Pd[2] = accelerations(xs, Kx[2], fm, hi, F, Kv[2])
     for i in range(hi):
         xs[i] = x[i] + h * (A41 * Kx[0, i] + A42 * Kx[1, i] + A43 * Kx[2, i])
         Kx[3, i] = v[i] + h * (A41 * Kv[0, i] + A42 * Kv[1, i] + A43 * Kv[2, i])
-    accelerations(xs, fm, hi, F, Kv[3])
+    Pd[3] = accelerations(xs, Kx[3], fm, hi, F, Kv[3])
     for i in range(hi):
         xs[i] = x[i] + h * (A51 * Kx[0, i] + A52 * Kx[1, i] + A53 * Kx[2, i] + A54 * Kx[3, i])
         Kx[4, i] = v[i] + h * (A51 * Kv[0, i] + A52 * Kv[1, i] + A53 * Kv[2, i] + A54 * Kv[3, i])
-    accelerations(xs, fm, hi, F, Kv[4])
+    Pd[4] = accelerations(xs, Kx[4], fm, hi, F, Kv[4])
     for i in range(hi):
         xs[i] = x[i] + h * (A61 * Kx[0, i] + A62 * Kx[1, i] + A63 * Kx[2, i] + A64 * Kx[3, i] + A65 * Kx[4, i])
         Kx[5, i] = v[i] + h * (A61 * Kv[0, i] + A62 * Kv[1, i] + A63 * Kv[2, i] + A64 * Kv[3, i] + A65 * Kv[4, i])
-    accelerations(xs, fm, hi, F, Kv[5])
+    Pd[5] = accelerations(xs, Kx[5], fm, hi, F, Kv[5])
     for i in range(hi):
         xs[i] = x[i] + h * (B1 * Kx[0, i] + B3 * Kx[2, i] + B4 * Kx[3, i] + B5 * Kx[4, i] + B6 * Kx[5, i])
         vs[i] = v[i] + h * (B1 * Kv[0, i] + B3 * Kv[2, i] + B4 * Kv[3, i] + B5 * Kv[4, i] + B6 * Kv[5, i])
         Kx[6, i] = vs[i]
-    accelerations(xs, fm, hi, F, Kv[6])
+    Pd[6] = accelerations(xs, Kx[6], fm, hi, F, Kv[6])
+
+
+@njit(**JIT_INLINE)
+def dissipated(Pd, h):
+    """The energy dissipated over a step, by the 5th-order quadrature of the stages' powers (the
+    weights of the solution): the dissipated energy is one more component of the state, integrated
+    with it (its error is then of the method's order, and the energy balance checks it)."""
+    return h * (B1 * Pd[0] + B3 * Pd[2] + B4 * Pd[3] + B5 * Pd[4] + B6 * Pd[5])
 
 
 @njit(**JIT_INLINE)

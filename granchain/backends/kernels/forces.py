@@ -8,8 +8,15 @@ A rigid wall at the far end is a last granule of infinite mass (inverse mass 0, 
 stiffness sqrt(2 R_M), the limit of Eq. r-prime): it never moves, and the same force routines
 serve it; the stop rule (``stop``) and the energy and momentum sums (which skip it) know about it.
 
-The forces depend on positions only (``granchain.model.contacts.PowerLaw.conservative``): that is what
-licenses the Nystrom method (``rkn4``) and Verlet, and the potential energy below.
+The elastic forces depend on positions only (``granchain.model.contacts.PowerLaw.conservative``): that
+is what licenses the Nystrom method (``rkn4``) and Verlet, and the potential energy below. The
+viscoelastic law (``law_force``) depends on the rate of compression too: only DP5 (and SciPy's DOP853)
+integrate it, and the power it takes from the motion is returned by ``accelerations`` so that the
+integrator accumulates the dissipated energy with its own quadrature weights.
+
+A precompressed chain (``static_force`` > 0) is integrated in displacements from its static state: each
+contact has a static overlap delta0_k and force f0_k (``static_state``), and the kernels use the dynamic
+force F_k - f0_k, which is exactly 0 in the static state.
 """
 
 from __future__ import annotations
@@ -50,86 +57,161 @@ def contact_force(d, c, p):
     return c * d ** (p.n - 1.0)
 
 
-@njit(**JIT_INLINE)
-def accelerations(x, fm, hi, F, a):
-    """a_k for k < hi (Eq. motion_rescaled), the forces' parameters in ``fm`` (``records.Forces``).
+@njit(**JIT)
+def law_force(d, w, c, p):
+    """The force of a contact of compression ``d`` (the static overlap included) closing at the rate
+    ``w`` = d(delta)/dt, by the chain's contact law: the elastic :func:`contact_force` when
+    ``p.gamma`` = 0, else the viscoelastic Hertz force of Kuwabara & Kono (J. Appl. Phys. Jpn. 26,
+    1230 (1987)) and Brilliantov et al. (Phys. Rev. E 53, 5382 (1996)),
+    c [d^(n-1) + gamma d^(n-2) w], never attractive (0 while the contact is closed but the damping
+    would pull: the spheres separate freely) and 0 for d <= 0 (``granchain.model.contacts.Viscoelastic``)."""
+    if p.gamma == 0.0:
+        return contact_force(d, c, p)
+    if d <= 0.0:
+        return 0.0
+    if p.power == POW_HERTZ:
+        f = c * math.sqrt(d) * (d + p.gamma * w)
+    elif p.power == POW_LINEAR:
+        f = c * (d + p.gamma * w)
+    else:
+        f = c * d ** (p.n - 2.0) * (d + p.gamma * w)
+    return max(f, 0.0)
 
-    ``F`` is scratch of length >= hi + 1: F[j + 1] receives the force of contact j, and F[0] (the free
-    end) and F[hi] past the last granule (when hi = M) are set to 0, so that a_k = (F[k] - F[k + 1]) / m_k
-    for every k, the chain's ends included, in one loop that vectorises."""
-    c, inv_m, p = fm
+
+@njit(**JIT)
+def force_rate(d, w, dw, c, p):
+    """d/dt of :func:`law_force` for compression ``d``, rate ``w`` and its derivative ``dw`` (the
+    relative acceleration): where it falls from + to - the contact force peaks. For the elastic law
+    the compression peaks there (w = 0); for the viscoelastic one the force peaks earlier, while the
+    contact still closes. 0 where the force is 0 (open, or clamped)."""
+    if d <= 0.0 or law_force(d, w, c, p) <= 0.0:
+        return 0.0
+    n, g = p.n, p.gamma
+    if p.power == POW_HERTZ:
+        r = math.sqrt(d)
+        return c * (1.5 * r * w + g * (0.5 * w * w / r + r * dw))
+    return c * ((n - 1.0) * d ** (n - 2.0) * w + g * ((n - 2.0) * d ** (n - 3.0) * w * w + d ** (n - 2.0) * dw))
+
+
+@njit(**JIT)
+def static_state(c, p):
+    """(delta0, f0) of a contact of prefactor ``c`` in the static state of a chain precompressed by
+    F0 = ``p.static_force`` (``granchain.model.contacts.Precompression``): the overlap
+    delta0 = (F0 / c)^(1/(n-1)) at which the contact carries F0 (V. F. Nesterenko, *Dynamics of
+    Heterogeneous Materials*, Springer 2001, Sec. 1.1), and f0 its force by the very law and
+    arithmetic the kernels use (:func:`law_force`), F0 to rounding. The kernels subtract f0 from each
+    contact force, so the static state is an exact equilibrium in floating point: granules ahead of
+    the pulse are exactly at rest. (0, 0) without precompression, and for the zero-stiffness padding."""
+    if p.static_force <= 0.0 or c <= 0.0:
+        return 0.0, 0.0
+    d0 = (p.static_force / c) ** (1.0 / (p.n - 1.0))
+    return d0, law_force(d0, 0.0, c, p)
+
+
+@njit(**JIT_INLINE)
+def accelerations(x, v, fm, hi, F, a):
+    """a_k for k < hi (Eq. motion_rescaled), the forces' parameters in ``fm`` (``records.Forces``);
+    returns the power the contacts dissipate (0 for elastic contacts).
+
+    ``x`` are displacements from the static state (positions from contact for an unloaded chain),
+    ``v`` the velocities (read only by a viscoelastic law). ``F`` is scratch of length >= hi + 1:
+    F[j + 1] receives the dynamic force of contact j (its force minus its static force f0_j), and
+    F[0] and F[hi] past the last granule (when hi = M) are set to 0, so that a_k = (F[k] - F[k + 1]) / m_k
+    for every k, the chain's ends included, in one loop that vectorises. The dynamic force 0 at an end
+    is a free end, or an end held by the constant static force F0 of a precompressed chain (the
+    external load balances f0 there; ``granchain.model.contacts.Precompression``)."""
+    c, inv_m, p, o, f0 = fm
     M = x.shape[0]
     nc = min(hi, M - 1)  # contacts 0..nc-1; contact hi-1 touches the resting granule hi
     F[0] = 0.0
     F[hi] = 0.0  # overwritten below by contact hi - 1 unless hi = M
-    if p.power == POW_HERTZ:  # branch-free so that the loop vectorises (SIMD sqrt)
+    dissipated = 0.0
+    if p.gamma == 0.0 and p.static_force == 0.0:  # the paper's chain
+        if p.power == POW_HERTZ:  # branch-free so that the loop vectorises (SIMD sqrt)
+            for j in range(nc):
+                d = max(x[j] - x[j + 1], 0.0)
+                F[j + 1] = c[j] * d * math.sqrt(d)
+        else:
+            for j in range(nc):
+                F[j + 1] = contact_force(x[j] - x[j + 1], c[j], p)
+    elif p.gamma == 0.0:  # precompressed, elastic
         for j in range(nc):
-            d = max(x[j] - x[j + 1], 0.0)
-            F[j + 1] = c[j] * d * math.sqrt(d)
-    else:
+            F[j + 1] = contact_force(o[j] + (x[j] - x[j + 1]), c[j], p) - f0[j]
+    else:  # viscoelastic (and precompressed, if o, f0 are not 0)
         for j in range(nc):
-            F[j + 1] = contact_force(x[j] - x[j + 1], c[j], p)
+            d = o[j] + (x[j] - x[j + 1])
+            w = v[j] - v[j + 1]
+            f = law_force(d, w, c[j], p)
+            if d > 0.0:
+                # Power taken from the motion: (F - F_elastic) w >= 0 (also where F is clamped at 0).
+                dissipated += (f - contact_force(d, c[j], p)) * w
+            F[j + 1] = f - f0[j]
     for k in range(hi):
         a[k] = (F[k] - F[k + 1]) * inv_m[k]
-
-
-@njit(**JIT)
-def acceleration_of(x, k, fm):
-    """The acceleration of granule k alone (``fm``: ``records.Forces``)."""
-    c, inv_m, p = fm
-    M = x.shape[0]
-    left = contact_force(x[k - 1] - x[k], c[k - 1], p) if k > 0 else 0.0
-    right = contact_force(x[k] - x[k + 1], c[k], p) if k < M - 1 else 0.0
-    return (left - right) * inv_m[k]
+    return dissipated
 
 
 @njit(**JIT)
 def impulse_energy(m0, v0):
-    """The energy of the initial state, all kinetic: granule 1 struck with v0, the rest at rest
-    (``granchain.model.contacts.Impulse``)."""
+    """The energy of the initial state, all kinetic: granule 1 (or a striker) struck with v0, the rest
+    at rest in the static state (``granchain.model.contacts.Impulse``, ``Striker``)."""
     return 0.5 * m0 * v0 * v0
 
 
 @njit(**JIT)
-def total_energy(x, v, m, c, n):
+def total_energy(x, v, m, c, p):
     """Kinetic plus potential energy, sum m v^2/2 + sum (c/n) delta^n (Eq. hertz-1).
 
-    A wall (infinite mass, at rest) has no kinetic energy; its contact's potential counts."""
+    A wall (infinite mass, at rest) has no kinetic energy; its contact's potential counts. For a
+    precompressed chain the potential is measured from the static state (:func:`add_potential`)."""
     M = x.shape[0]
     e = 0.0
     for k in range(M):
         if m[k] < math.inf:
             e += 0.5 * m[k] * v[k] * v[k]
-    return add_potential(e, x, c, n, 0, M - 1)
+    return add_potential(e, x, c, p, 0, M - 1)
 
 
 @njit(**JIT)
-def add_potential(e, x, c, n, first, last):
-    """e + the potential energy (c_j / n) delta_j^n of contacts first..last-1 (Eq. hertz-1), added
-    one contact at a time (the order :func:`total_energy` has always summed in)."""
+def add_potential(e, x, c, p, first, last):
+    """e + the potential energy of contacts first..last-1, added one contact at a time (the order
+    :func:`total_energy` has always summed in): (c_j / n) delta_j^n (Eq. hertz-1). For a
+    precompressed chain, of the dynamic force (:func:`accelerations`) from the static state:
+    V(delta0 + D) - V(delta0) - f0 D with D = x_j - x_{j+1}, the elastic energy stored beyond the
+    static state less the work of the constant load that holds the chain (Nesterenko 2001, Sec. 1.1)."""
+    n = p.n
+    if p.static_force == 0.0:
+        for j in range(first, last):
+            d = x[j] - x[j + 1]
+            if d > 0.0:
+                e += c[j] / n * d**n
+        return e
     for j in range(first, last):
-        d = x[j] - x[j + 1]
-        if d > 0.0:
-            e += c[j] / n * d**n
+        d0, f0 = static_state(c[j], p)
+        D = x[j] - x[j + 1]
+        d = d0 + D
+        u = c[j] / n * d**n if d > 0.0 else 0.0
+        e += (u - c[j] / n * d0**n) - f0 * D
     return e
 
 
 @njit(**JIT)
-def final_energy(x, v, m, c, n, info):
+def final_energy(x, v, m, c, p, info):
     """The energy a finished run reports: kinetic energy of every granule (granules behind a
     trailing window keep the velocity they left it with), the potential of the contacts still
     integrated (from granule ``info[INFO_WINDOW_START]`` on) at the end, and the potential the
     contacts behind the window held when they left it (``info[INFO_FROZEN_POTENTIAL]``). The
     contact across the window's edge was open when it was cut, so no energy is lost there; the
-    drift E_end - E_0 is then the integration error, granule by granule up to its exit from the
-    window. Without a window (start 0, nothing frozen) this is :func:`total_energy`, bit for bit."""
+    drift E_end + E_dissipated - E_0 is then the integration error, granule by granule up to its exit
+    from the window. Without a window (start 0, nothing frozen) this is :func:`total_energy`, bit for
+    bit. The energy dissipated by viscoelastic contacts is ``info[INFO_DISSIPATED]``, apart."""
     lo = int(info[INFO_WINDOW_START])
     if lo == 0:
-        return total_energy(x, v, m, c, n)
+        return total_energy(x, v, m, c, p)
     e = info[INFO_FROZEN_POTENTIAL]
     for k in range(lo):
         e += 0.5 * m[k] * v[k] * v[k]
-    return e + total_energy(x[lo:], v[lo:], m[lo:], c[lo:], n)
+    return e + total_energy(x[lo:], v[lo:], m[lo:], c[lo:], p)
 
 
 @njit(**JIT)

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 from numba import njit
 
-from .forces import contact_force
+from .forces import law_force, static_state
 from .jit import JIT
 from .records import (
+    INFO_DISSIPATED,
     INFO_EVALUATIONS,
     INFO_EXIT,
     INFO_FROZEN_POTENTIAL,
@@ -38,16 +39,24 @@ def initial_records(obs, v, t_grid, peak_v, peak_t, grid_v):
 
 
 @njit(**JIT)
-def initial_force_records(x, model, g, out):
+def initial_force_records(x, model, g, out, contacts):
     """No contact has a force peak yet (0 at t = 0); with a wall, its force at the ``g`` grid times
-    <= 0 (the state at t = 0) into ``out.grid_f``."""
+    <= 0 (the state at t = 0: the static load of a precompressed chain) into ``out.grid_f``."""
     M = x.shape[0]
     for j in range(M - 1):
         out.peak_f[j] = 0.0
         out.peak_ft[j] = 0.0
-    if model.params.wall:
+    p = model.params
+    if p.wall:
+        c = model.stiffness[M - 2]
+        d0, _ = static_state(c, p)
         for gg in range(g):
-            out.grid_f[gg] = contact_force(x[M - 2] - x[M - 1], model.stiffness[M - 2], model.params)
+            out.grid_f[gg] = law_force(d0 + (x[M - 2] - x[M - 1]), 0.0, c, p)
+    for s in range(out.grid_c.shape[1]):  # recorded contacts (Run.contacts): their force at t = 0
+        j = contacts[s]
+        d0, _ = static_state(model.stiffness[j], p)
+        for gg in range(g):
+            out.grid_c[gg, s] = law_force(d0 + (x[j] - x[j + 1]), 0.0, model.stiffness[j], p)
 
 
 @njit(**JIT)
@@ -87,15 +96,17 @@ def final_force_peaks(x, v, c, p, lo, t, peak_rtol, peak_f, peak_ft):
     ``x``, ``v``, ``c`` hold the integrated granules lo.. and their contacts (contact j of the
     chain is entry j - lo); the contacts behind a trailing window have final peaks."""
     for j in range(x.shape[0] - 1):
-        if v[j] - v[j + 1] > 0.0:
-            f = contact_force(x[j] - x[j + 1], c[j], p)
+        w = v[j] - v[j + 1]
+        if w > 0.0:
+            d0, _ = static_state(c[j], p)
+            f = law_force(d0 + (x[j] - x[j + 1]), w, c[j], p)
             if f > 0.0 and is_new_peak(f, peak_f[lo + j], peak_rtol):
                 peak_f[lo + j] = f
                 peak_ft[lo + j] = t
 
 
 @njit(**JIT)
-def write_info(info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential):
+def write_info(info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential, dissipated):
     """Fill the ``info`` record of a finished run (slots INFO_*)."""
     info[INFO_T_END] = t
     info[INFO_STEPS] = n_acc
@@ -104,3 +115,4 @@ def write_info(info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential):
     info[INFO_EVALUATIONS] = n_eval
     info[INFO_WINDOW_START] = lo
     info[INFO_FROZEN_POTENTIAL] = frozen_potential
+    info[INFO_DISSIPATED] = dissipated

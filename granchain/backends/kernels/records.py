@@ -18,10 +18,12 @@ from collections import namedtuple
 #: exponent of the power-law contact (granchain.model.contacts.PowerLaw); ``power`` its fast-path code
 #: (``forces.power_code``); ``wall`` whether the far end is a rigid wall (the boundary value of the
 #: chain, ``granchain.model.contacts.RigidWall``: asked here once, not re-derived from the infinite mass).
-#: A new physics parameter is one more field here, filled in one place
+#: ``gamma`` the damping time of the viscoelastic contact (``granchain.model.contacts.Viscoelastic``;
+#: 0: elastic), ``static_force`` the precompression F0 (``granchain.model.contacts.Precompression``; 0:
+#: none). A new physics parameter is one more field here, filled in one place
 #: (``granchain.backends.numba_backend.model_params``), and the kernels that need it read it by name:
 #: no signature between them changes (``tests/test_backends.py`` checks this).
-Params = namedtuple("Params", ["n", "power", "wall"])
+Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force"])
 
 #: One chain as the kernels see it (Eq. motion_rescaled). ``masses`` (M,), the last ``inf`` for a
 #: rigid wall; ``stiffness`` (M-1,), the prefactors c_k; ``params`` its :data:`Params`.
@@ -41,17 +43,20 @@ Steps = namedtuple("Steps", ["rtol", "atol", "first_step", "fixed_step", "relaxe
 
 #: What to record and when to stop: the ``observed`` granules (int64, (K,)), the ``t_grid`` (T,)
 #: on which their velocities are sampled, the hard limit ``t_max``, whether to stop
-#: ``exit_margin`` after the pulse has left (``stop_at_exit``), the step budget ``max_steps`` and the
-#: tie rule of peaks ``peak_rtol`` (``peaks.is_new_peak``).
-Run = namedtuple("Run", ["observed", "t_grid", "t_max", "stop_at_exit", "exit_margin", "max_steps", "peak_rtol"])
+#: ``exit_margin`` after the pulse has left (``stop_at_exit``), the step budget ``max_steps``, the
+#: tie rule of peaks ``peak_rtol`` (``peaks.is_new_peak``) and the ``contacts`` (int64, (S,), 0-based)
+#: whose force is recorded on the grid (a sensor granule's two contacts; empty: none).
+Run = namedtuple("Run", ["observed", "t_grid", "t_max", "stop_at_exit", "exit_margin", "max_steps", "peak_rtol",
+                         "contacts"])
 
 #: The state (x, v) of the M granules: the initial state on entry, the final one on return.
 State = namedtuple("State", ["x", "v"])
 
 #: What one integration records: per observed granule its peak velocity and time (K,), its
 #: velocities on the grid ``grid_v`` (T, K, time-major); per contact its peak force and time (M-1,);
-#: the wall force on the grid ``grid_f`` (T,; with a wall); the run's ``info`` (INFO_SIZE,).
-Outputs = namedtuple("Outputs", ["peak_v", "peak_t", "grid_v", "peak_f", "peak_ft", "grid_f", "info"])
+#: the wall force on the grid ``grid_f`` (T,; with a wall); the run's ``info`` (INFO_SIZE,); the
+#: forces of ``Run.contacts`` on the grid ``grid_c`` (T, S; NaN behind a trailing window).
+Outputs = namedtuple("Outputs", ["peak_v", "peak_t", "grid_v", "peak_f", "peak_ft", "grid_f", "info", "grid_c"])
 
 #: What the ensemble kernel records per realisation r (rows): peak velocity and time (R, K), the
 #: recorded contacts' peak force and time (R, C), the wall's peak force and time (R, 2), the status,
@@ -72,8 +77,10 @@ Tally = namedtuple("Tally", ["contacts", "scale", "lags"])
 Partials = namedtuple("Partials", ["sum_v", "sum_v2", "sum_wall", "n_valid", "sum_a", "sum_a2"])
 
 #: What a force evaluation reads, as views from the window's first granule on: the contact
-#: prefactors, the inverse masses (0 for a wall and for padding) and the model's :data:`Params`.
-Forces = namedtuple("Forces", ["stiffness", "inv_mass", "params"])
+#: prefactors, the inverse masses (0 for a wall and for padding), the model's :data:`Params`, and for
+#: a precompressed chain each contact's static overlap delta0_k and static force f0_k
+#: (``forces.static_state``; zeros without precompression).
+Forces = namedtuple("Forces", ["stiffness", "inv_mass", "params", "overlap", "preload"])
 
 # Slots of the ``info`` array every single-chain kernel fills.
 INFO_T_END = 0  # time the run stopped
@@ -83,7 +90,8 @@ INFO_EXIT = 3  # time the pulse left the last granule (-1: it did not)
 INFO_EVALUATIONS = 4  # force evaluations (whole-window sweeps)
 INFO_WINDOW_START = 5  # first granule still integrated at the end (0-based; > 0 only with a trailing window)
 INFO_FROZEN_POTENTIAL = 6  # potential energy of the contacts behind the window when they left it
-INFO_SIZE = 7
+INFO_DISSIPATED = 7  # energy dissipated by viscoelastic contacts (0 for elastic ones)
+INFO_SIZE = 8
 
 # Method kinds (``Method.kind``): one id per compiled method, the only place it is numbered.
 KIND_DP5 = 0

@@ -19,14 +19,16 @@ from . import dp5, rkn4
 from .dense import (
     ROOT_ACCELERATION,
     ROOT_APPROACH,
+    ROOT_FORCE_RATE,
     dense_compression,
+    dense_force,
     dense_value,
     falls,
     first_root,
     hermite_max_estimate,
     weights,
 )
-from .forces import accelerations, add_potential, contact_force
+from .forces import accelerations, add_potential, contact_force, force_rate, static_state
 from .jit import JIT, JIT_INLINE
 from .memory import borrowed, keep_alive
 from .peaks import (
@@ -43,6 +45,7 @@ from .window import (
     advance_window,
     initial_window,
     is_finite_window,
+    margin,
     open_contact_behind,
 )
 
@@ -149,10 +152,15 @@ def rk_integrate(method, steps, model, run, state, out):
     vp = np.zeros(Mp)
     cp = np.zeros(Mp)
     inv_m = np.zeros(Mp)
+    op = np.zeros(Mp)  # static overlaps delta0_k (precompression; else 0)
+    f0p = np.zeros(Mp)  # static forces f0_k
     xp[:M] = x
     vp[:M] = v
     cp[:M - 1] = c
     inv_m[:M] = 1.0 / m
+    if model.params.static_force > 0.0:
+        for j in range(M - 1):
+            op[j], f0p[j] = static_state(c[j], model.params)
     Kx = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
     Kv = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
     xs = np.zeros(Mp)
@@ -160,6 +168,7 @@ def rk_integrate(method, steps, model, run, state, out):
     F = np.zeros(Mp + 1)  # contact forces, F[j + 1] for contact j (see forces.accelerations)
     Q = np.zeros(7)
     Qv = np.zeros(7)  # RKN4's velocity weights (DP5 uses Q for both)
+    Pd = np.zeros(7)  # dissipated power at DP5's stages
     ratio = np.zeros(2 * Mp)
     peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
     t_frozen = np.zeros(M)  # time each granule left the trailing window
@@ -167,17 +176,18 @@ def rk_integrate(method, steps, model, run, state, out):
     # our caller, the scratch arrays above by the keep_alive call after the loop.
     bmodel = Model(borrowed(m), borrowed(cp), model.params)
     brun = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin,
-               run.max_steps, run.peak_rtol)
+               run.max_steps, run.peak_rtol, borrowed(run.contacts))
     bstate = State(borrowed(xp), borrowed(vp))
     bout = Outputs(borrowed(out.peak_v), borrowed(out.peak_t), borrowed(out.grid_v), borrowed(out.peak_f),
-                   borrowed(out.peak_ft), borrowed(out.grid_f), borrowed(out.info))
+                   borrowed(out.peak_ft), borrowed(out.grid_f), borrowed(out.info), borrowed(out.grid_c))
     scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
-               borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen))
+               borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen), borrowed(op), borrowed(f0p),
+               borrowed(Pd))
     if method == KIND_RKN4:
         status = _rkn4_loop(steps, bmodel, brun, bstate, bout, scratch)
     else:
         status = _dp5_loop(steps, bmodel, brun, bstate, bout, scratch)
-    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen)
+    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd)
     x[:] = xp[:M]
     v[:] = vp[:M]
     return status
@@ -205,8 +215,9 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     ``inv_m`` = 1 / m in the padded layout (length Mp = M + LANES, see :data:`LANES`), and the zeroed
     scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``, ``vs`` (Mp); ``peak_d``,
     ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); error
-    ratios ``ratio`` (2 Mp)) in the tuple ``scratch``."""
-    inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen = scratch
+    ratios ``ratio`` (2 Mp); static overlaps and forces ``op``, ``f0p`` (Mp, ``forces.static_state``);
+    the stages' dissipated power ``Pd`` (7)) in the tuple ``scratch``."""
+    inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd = scratch
     m, c, p = model.masses, model.stiffness, model.params
     x, v = state
     obs, t_grid = run.observed, run.t_grid
@@ -217,6 +228,8 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     Mp = x.shape[0]
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
+    sensed = run.contacts
+    n_sensed = sensed.shape[0]
 
     # The window: granules lo..hi-1 are integrated (lo = 0 until a trailing-window cut). Kx, Kv are
     # window-local (shifted to start at lo at each cut); the other arrays are read through views from
@@ -224,20 +237,23 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     QV = Qv if method == KIND_RKN4 else Q  # velocity weights (see dense.weights)
     alpha = ALPHA_RKN4 if method == KIND_RKN4 else ALPHA  # PI controller exponent of the error estimate
     goal = relax_lag > 0 or window_lag > 0
+    damped = p.gamma > 0.0
+    ahead = margin(p)
     lo = 0
-    hi = initial_window(x[:M], v[:M])
-    accelerations(x, Forces(c, inv_m, p), hi, F, Kv[0])
+    hi = initial_window(x[:M], v[:M], ahead)
+    Pd[0] = accelerations(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0])
     for i in range(hi):
         Kx[0, i] = v[i]
     n_eval = 1
     front = -1  # observed granule (index into obs) of the front
     relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
     frozen_potential = 0.0
+    dissipated = 0.0
 
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    initial_force_records(x[:M], model, g, out)
+    initial_force_records(x[:M], model, g, out, run.contacts)
 
     h = h_fixed if h_fixed > 0.0 else steps.first_step
     err_old = 1e-4
@@ -257,7 +273,8 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
         X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
         XS, VS = xs[lo:], vs[lo:]
         XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
-        FM = Forces(C, IM, p)
+        OP = op[lo:]
+        FM = Forces(C, IM, p, OP, f0p[lo:])
         while status < 0:
             if n_acc + n_rej >= run.max_steps:
                 status = MAX_STEPS
@@ -276,7 +293,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                 rkn4.stages(X, V, Kv, XS, VS, h, hp, FM, F)
                 n_eval += 3
             else:
-                dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F)
+                dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F, Pd)
                 n_eval += 6
             # xs, vs now hold the new solution at t + h (DP5: 5th order; RKN4: 4th order).
             accept = True
@@ -324,21 +341,33 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
             # padding's with the last granule, which only lets the loop run).
             # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
             n_candidates = 0
-            for j in range(hp):
-                n_candidates += falls(Kx[0, j] - Kx[0, j + 1], Kx[6, j] - Kx[6, j + 1])
+            if damped:  # a viscoelastic force peaks before its compression does: follow its rate
+                for j in range(hw - 1):
+                    r0 = force_rate(OP[j] + (X[j] - X[j + 1]), Kx[0, j] - Kx[0, j + 1], Kv[0, j] - Kv[0, j + 1], C[j], p)
+                    r1 = force_rate(OP[j] + (XS[j] - XS[j + 1]), Kx[6, j] - Kx[6, j + 1], Kv[6, j] - Kv[6, j + 1], C[j], p)
+                    if falls(r0, r1):
+                        theta = first_root(method, ROOT_FORCE_RATE, j, (r0, r1), step, FM, Q, QV)
+                        weights(method, theta, Q, QV)
+                        fp = dense_force(j, step, FM, Q, QV)
+                        if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
+                            peak_f[lo + j] = fp
+                            peak_ft[lo + j] = t + theta * h
+            else:
+                for j in range(hp):
+                    n_candidates += falls(Kx[0, j] - Kx[0, j + 1], Kx[6, j] - Kx[6, j + 1])
             for j in range(hw - 1 if n_candidates > 0 else 0):
                 w0 = Kx[0, j] - Kx[0, j + 1]
                 w1 = Kx[6, j] - Kx[6, j + 1]
                 if falls(w0, w1):
                     # Screen: the cubic Hermite estimate of the compression maximum from the step ends
                     # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
-                    d0 = X[j] - X[j + 1]
-                    d1 = XS[j] - XS[j + 1]
+                    d0 = OP[j] + (X[j] - X[j + 1])
+                    d1 = OP[j] + (XS[j] - XS[j + 1])
                     if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
                         continue
                     theta = first_root(method, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
                     weights(method, theta, Q, QV)
-                    dp = dense_compression(j, X, Kx, h, Q)
+                    dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
                     fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
                     if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
                         peak_f[lo + j] = fp
@@ -353,8 +382,11 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                         grid_v[g, q] = v[obs[q]]
                     else:
                         grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
-                if p.wall:
-                    grid_f[g] = contact_force(dense_compression(M - 2 - lo, X, Kx, h, Q), C[M - 2 - lo], p) if M - 2 < hi else 0.0
+                if p.wall:  # the total force on the wall (the static load included)
+                    grid_f[g] = dense_force(M - 2 - lo, step, FM, Q, QV) if M - 2 < hi else 0.0
+                for s in range(n_sensed):  # granules past the window are at rest: the force is exact there too
+                    j = sensed[s] - lo
+                    out.grid_c[g, s] = dense_force(j, step, FM, Q, QV) if j >= 0 else math.nan
                 g += 1
 
             for i in range(hp):
@@ -362,16 +394,19 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                 V[i] = VS[i]
                 Kx[0, i] = Kx[6, i]
                 Kv[0, i] = Kv[6, i]
+            if damped:
+                dissipated += dp5.dissipated(Pd, h)
+                Pd[0] = Pd[6]
             t = t + h if not last else t_stop
             n_acc += 1
             if h_fixed > 0.0 and not is_finite_window(X, V, hw):  # adaptive: checked in the error norm
                 status = NONFINITE
                 break
             if hi < M:
-                new_hi = lo + advance_window(XM, VM, hw)
+                new_hi = lo + advance_window(XM, VM, hw, ahead)
                 if new_hi > hi:
                     hi = new_hi
-                    accelerations(X, FM, hi - lo, F, Kv[0])
+                    Pd[0] = accelerations(X, V, FM, hi - lo, F, Kv[0])
                     for i in range(hi - lo):
                         Kx[0, i] = V[i]
                     n_eval += 1
@@ -383,7 +418,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                         # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
                         # contacts among them (the contact at the new edge is open), their exit time.
                         d = new_lo - lo
-                        frozen_potential = add_potential(frozen_potential, X, C, p.n, 0, d - 1)
+                        frozen_potential = add_potential(frozen_potential, X, C, p, 0, d - 1)
                         for i in range(d):
                             t_frozen[lo + i] = t
                         for s in range(7):  # the whole padded width: zeros follow the window
@@ -414,5 +449,5 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     final_force_peaks(X, V, C, p, lo, t, peak_rtol, peak_f, peak_ft)
     for k in range(lo):  # the granules behind the window continued ballistically
         x[k] += v[k] * (t - t_frozen[k])
-    write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential)
+    write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential, dissipated)
     return status

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from ..._status import MAX_STEPS, NONFINITE
-from .forces import accelerations, contact_force
+from .forces import accelerations, contact_force, static_state
 from .jit import JIT
 from .peaks import (
     final_force_peaks,
@@ -33,7 +33,7 @@ from .peaks import (
 )
 from .records import Forces
 from .stop import end_of_step, stop_time
-from .window import advance_window, initial_window, is_finite_window
+from .window import advance_window, initial_window, is_finite_window, margin
 
 ORDER = 2
 
@@ -48,10 +48,11 @@ def hermite(y0, dy0, y1, dy1, h, theta):
 
 
 @njit(**JIT)
-def _hermite_force(j, x_old, v_old, x, v, h, theta, c, p):
-    """Contact force of contact j at t + theta h from the Hermite positions (Eq. motion_rescaled)."""
+def _hermite_force(j, x_old, v_old, x, v, h, theta, c, p, o):
+    """Contact force of contact j at t + theta h from the Hermite positions (Eq. motion_rescaled), its
+    static overlap ``o[j]`` included (a precompressed chain)."""
     d = hermite(x_old[j], v_old[j], x[j], v[j], h, theta) - hermite(x_old[j + 1], v_old[j + 1], x[j + 1], v[j + 1], h, theta)
-    return contact_force(d, c[j], p)
+    return contact_force(o[j] + d, c[j], p)
 
 
 @njit(**JIT)
@@ -66,19 +67,25 @@ def verlet_integrate(h, model, run, state, out):
     n_obs = obs.shape[0]
     n_grid = t_grid.shape[0]
     inv_m = 1.0 / m
-    fm = Forces(c, inv_m, p)
+    o = np.zeros(M)  # static overlaps and forces of a precompressed chain (forces.static_state)
+    f0 = np.zeros(M)
+    if p.static_force > 0.0:
+        for j in range(M - 1):
+            o[j], f0[j] = static_state(c[j], p)
+    fm = Forces(c, inv_m, p, o, f0)
     a = np.zeros(M)
     a_new = np.zeros(M)
     v_old = np.zeros(M)
     x_old = np.zeros(M)
     F = np.zeros(M + 1)  # contact forces, F[j + 1] for contact j (see forces.accelerations)
-    hi = initial_window(x, v)
-    accelerations(x, fm, hi, F, a)
+    ahead = margin(p)
+    hi = initial_window(x, v, ahead)
+    accelerations(x, v, fm, hi, F, a)
     n_eval = 1
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    initial_force_records(x, model, g, out)
+    initial_force_records(x, model, g, out, run.contacts)
     exit_since = -1.0
     n_acc = 0
     status = -1
@@ -96,7 +103,7 @@ def verlet_integrate(h, model, run, state, out):
             v_old[i] = v[i]
             x_old[i] = x[i]
             x[i] += dt * v[i] + 0.5 * dt * dt * a[i]
-        accelerations(x, fm, hi, F, a_new)
+        accelerations(x, v, fm, hi, F, a_new)  # forces of positions only (Verlet refuses others): v unread
         n_eval += 1
         for i in range(hi):
             v[i] += 0.5 * dt * (a[i] + a_new[i])
@@ -115,7 +122,7 @@ def verlet_integrate(h, model, run, state, out):
             w1 = v[j] - v[j + 1]
             if (w0 > 0.0) & (w1 <= 0.0):
                 theta = w0 / (w0 - w1)
-                fp = _hermite_force(j, x_old, v_old, x, v, dt, theta, c, p)
+                fp = _hermite_force(j, x_old, v_old, x, v, dt, theta, c, p, o)
                 if fp > 0.0 and is_new_peak(fp, peak_f[j], peak_rtol):
                     peak_f[j] = fp
                     peak_ft[j] = t + theta * dt
@@ -125,7 +132,9 @@ def verlet_integrate(h, model, run, state, out):
                 k = obs[q]
                 grid_v[g, q] = hermite(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
             if p.wall:
-                grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, p) if M - 2 < hi else 0.0
+                grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, p, o) if M - 2 < hi else 0.0
+            for s in range(run.contacts.shape[0]):  # granules past the window are at rest: exact there too
+                out.grid_c[g, s] = _hermite_force(run.contacts[s], x_old, v_old, x, v, dt, theta, c, p, o)
             g += 1
         for i in range(hi):
             a[i] = a_new[i]
@@ -134,15 +143,15 @@ def verlet_integrate(h, model, run, state, out):
         if not is_finite_window(x, v, hi):
             status = NONFINITE
             break
-        new_hi = advance_window(x, v, hi)
+        new_hi = advance_window(x, v, hi, ahead)
         if new_hi > hi:
             hi = new_hi
-            accelerations(x, fm, hi, F, a)
+            accelerations(x, v, fm, hi, F, a)
             n_eval += 1
         status, exit_since = end_of_step(x, v, m, p.wall, hi, t, run, exit_since, t_needed)
         if status >= 0:
             break
     final_peaks(obs, 0, v, a, t, peak_rtol, peak_v, peak_t)
     final_force_peaks(x, v, c, p, 0, t, peak_rtol, peak_f, peak_ft)
-    write_info(out.info, t, n_acc, 0, exit_since, n_eval, 0, 0.0)
+    write_info(out.info, t, n_acc, 0, exit_since, n_eval, 0, 0.0, 0.0)
     return status

@@ -1,10 +1,14 @@
 """The active window: which granules are integrated.
 
-``hi``: granules hi..M-1 are exactly at rest and uncompressed (the initial state's promise,
+``hi``: granules hi..M-1 are exactly at rest in the static state (uncompressed, or at their static
+overlaps in a precompressed chain, where the dynamic forces are exactly 0: the initial state's promise,
 ``granchain.model.contacts.Impulse.rest_ahead``), so only granules 0..hi-1 are integrated. A Runge-Kutta
-step spreads motion by at most a few granules per step (one per two stages), so the window is kept
-``WINDOW_MARGIN`` granules ahead of the last moving one; with that margin the windowed integration
-is identical, bit for bit, to integrating all granules.
+step spreads motion by at most a few granules per step, so the window is kept :func:`margin` granules
+ahead of the last moving one; with that margin the windowed integration is identical, bit for bit, to
+integrating all granules. With forces of positions only, motion spreads one granule per two stages
+(DP5's six new stages per step reach 4 granules past the last moving one: WINDOW_MARGIN = 5). A
+viscoelastic force reads the neighbours' velocities too, and motion spreads one granule per stage
+(7 past it: DAMPED_WINDOW_MARGIN = 9).
 
 ``lo``: the trailing window (``granchain.DP5(window_lag=...)``) drops granules behind the pulse
 across a contact that is open at that moment (:func:`open_contact_behind`).
@@ -19,26 +23,34 @@ from numba import njit
 from .jit import JIT, JIT_INLINE
 
 WINDOW_MARGIN = 5
+DAMPED_WINDOW_MARGIN = 9
+
+
+@njit(**JIT_INLINE)
+def margin(p):
+    """How far ahead of the last moving granule the window ends, for the model ``p``
+    (``records.Params``): farther for a viscoelastic law, whose forces read velocities."""
+    return DAMPED_WINDOW_MARGIN if p.gamma > 0.0 else WINDOW_MARGIN
 
 
 @njit(**JIT)
-def initial_window(x, v):
-    """Window end for a state given at t = 0: WINDOW_MARGIN past the last granule that moves."""
+def initial_window(x, v, ahead):
+    """Window end for a state given at t = 0: ``ahead`` (:func:`margin`) past the last granule that moves."""
     M = x.shape[0]
     last = M - 1
     while last > 0 and x[last] == 0.0 and v[last] == 0.0:
         last -= 1
-    return min(M, last + 1 + WINDOW_MARGIN)
+    return min(M, last + 1 + ahead)
 
 
 @njit(**JIT_INLINE)
-def advance_window(x, v, hi):
-    """New window end: WINDOW_MARGIN past the last granule that moved (never shrinks)."""
+def advance_window(x, v, hi, ahead):
+    """New window end: ``ahead`` (:func:`margin`) past the last granule that moved (never shrinks)."""
     M = x.shape[0]
     last = hi - 1
     while last > 0 and x[last] == 0.0 and v[last] == 0.0:
         last -= 1
-    return max(hi, min(M, last + 1 + WINDOW_MARGIN))
+    return max(hi, min(M, last + 1 + ahead))
 
 
 @njit(**JIT)
