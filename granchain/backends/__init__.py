@@ -90,12 +90,14 @@ class Backend:
 
         R, M = masses.shape
         wall = bool(np.isinf(masses[0, -1]))
+        limits = np.broadcast_to(np.asarray(t_max, dtype=float), (R,))
         for r in range(R):
             chain = batch_chain(masses[r], stiffness[r], n, initial_velocity[r], observed, model)
             x, v = np.zeros(M), np.zeros(M)
             v[0] = initial_velocity[r]
             st, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, _ = self.integrate(
-                integrator, chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=chain.ends_at_exit, controls=controls)
+                integrator, chain, x, v, t_grid=t_grid, t_max=float(limits[r]), stop_at_exit=chain.ends_at_exit,
+                controls=controls)
             out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
             gather_forces(peak_f, peak_ft, contacts, wall, out["peak_force"][r], out["peak_force_time"][r], out["peak_wall"][r])
             out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]

@@ -112,7 +112,8 @@ class NumbaBackend(Backend):
         self.check(integrator, first)
         method = method_record(effective_integrator(integrator, first))
         lags, sum_a, sum_a2 = aligned_outputs(out, observed.shape[0])
-        run = Run(observed, t_grid, float(t_max), first.ends_at_exit, controls.exit_margin, controls.max_steps,
+        limits = np.ascontiguousarray(np.broadcast_to(np.asarray(t_max, dtype=float), masses.shape[:1]))
+        run = Run(observed, t_grid, float(limits.max()), first.ends_at_exit, controls.exit_margin, controls.max_steps,
                   controls.peak_rtol, no_contacts())
         # Dynamic scheduling, one realisation at a time. Realisations differ in cost by up to 16x
         # (N = 6 decorated chains), and Numba's default static split (each thread a contiguous
@@ -122,7 +123,7 @@ class NumbaBackend(Backend):
         # per-thread sums are allocated here, not in the kernel (see thread_sums).
         with numba.parallel_chunksize(1):
             integrate_batch(
-                Batch(masses, stiffness, initial_velocity, model_params(first)), method, run,
+                Batch(masses, stiffness, initial_velocity, model_params(first), limits), method, run,
                 Tally(contacts, float(scale), lags),
                 Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
                      out["status"], out["energy_error"], out["n_steps"], out["t_end"]),

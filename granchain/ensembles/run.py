@@ -328,11 +328,13 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
         masses = np.ascontiguousarray(batch.masses, dtype=float)
         v0 = np.ascontiguousarray(batch.initial_velocity, dtype=float)
         stiffness = np.ascontiguousarray(batch.stiffness, dtype=float)
-        t_max = time_limit(masses.shape[1], float(v0.min()), batch.n)
-        if family.static_force > 0:  # no exit to stop at: to the time that bounds the crossing (default_t_max)
-            crossing = float(np.max(linear_crossing_time(masses, stiffness, batch.n, family.static_force)))
-            t_max = min(t_max, 2.0 * crossing + 20.0)
-        t_max = max(t_max, float(spec.t_grid[-1]))
+        t_max = max(time_limit(masses.shape[1], float(v0.min()), batch.n), float(spec.t_grid[-1]))
+        if family.static_force > 0:
+            # No exit to stop at: each row runs to its own time bounding the pulse's crossing, as
+            # simulate's default_t_max on the grid, so that a row does not depend on its chunk.
+            rows = [time_limit(masses.shape[1], float(v), batch.n) for v in v0]
+            crossing = linear_crossing_time(masses, stiffness, batch.n, family.static_force)
+            t_max = np.maximum(np.minimum(rows, 2.0 * crossing + 20.0), float(spec.t_grid[-1]))
         spec.chain_integrators[name].integrate_batch(
             masses, stiffness, batch.n, v0,
             np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),

@@ -131,8 +131,9 @@ class Integrator:
         ``out["lags"]`` (L,), also adds the aligned pulse's sums to ``["sum_a"]``/``["sum_a2"]``
         (L, K) (``granchain.backends.kernels.aligned``). ``model``: what the rows share besides their
         arrays, as keywords of :class:`granchain.Chain` (``contact``, ``static_force``, ``striker``;
-        None: the paper's elastic, unloaded chain struck on granule 1). A precompressed batch runs to
-        ``t_max`` (its contacts never open), the others stop at the pulse's exit.
+        None: the paper's elastic, unloaded chain struck on granule 1). ``t_max``: one time limit for all
+        rows, or one per row (R,). A precompressed batch runs to it (its contacts never open), the others
+        stop at the pulse's exit.
         """
         from ..backends import get_backend
 

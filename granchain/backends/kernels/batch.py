@@ -88,9 +88,10 @@ def thread_sums(n_threads, T, K, L):
 @njit(**JIT_PARALLEL)
 def integrate_batch(batch, method, run, tally, rows, sums, partials):
     """Integrate realisations r = 0..R-1 (rows of ``batch``, ``records.Batch``: each struck at granule 1
-    with its ``initial_velocity``) with ``method``, recording what ``run`` asks (its ``t_max``,
+    with its ``initial_velocity``) with ``method``, recording what ``run`` asks (its
     ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``; the run stops at the
-    pulse's exit with ``run.stop_at_exit``, else, successfully, at ``t_max``: a precompressed chain,
+    pulse's exit with ``run.stop_at_exit``, else, successfully, at the row's ``batch.t_max[r]`` (also its
+    limit otherwise; ``run.t_max`` is not read): a precompressed chain,
     whose contacts never open).
 
     Per realisation writes (``rows``, ``records.Rows``) peak_v[r, :], peak_t[r, :], status[r],
@@ -105,17 +106,19 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
     :func:`thread_sums` for numba.get_num_threads() threads (their first axis), added into ``sums``
     at the end.
     """
-    masses, stiffness, v_init = batch.masses, batch.stiffness, batch.initial_velocity
+    masses, stiffness, v_init, t_limit = batch.masses, batch.stiffness, batch.initial_velocity, batch.t_max
     # Rebuilt by a call: Numba's parallel lowering passes a named tuple into the loop body only when
     # it finds the call (or argument) that made it, not a field read (batch.params).
     params = Params(*batch.params)
     wall = params.wall
     obs, t_grid = run.observed, run.t_grid
+    # (read here: the parallel loop gets the fields, not the record; see params above)
+    stop_at_exit, exit_margin, max_steps, peak_rtol, sensed = (run.stop_at_exit, run.exit_margin, run.max_steps,
+                                                               run.peak_rtol, run.contacts)
     contacts, scale, lags = tally
     peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end = rows
     sum_v, sum_v2, sum_wall, n_valid, sum_a, sum_a2 = sums
     acc1, acc2, accw, cnt, al1, al2 = partials
-    exit_run = Run(obs, t_grid, run.t_max, run.stop_at_exit, run.exit_margin, run.max_steps, run.peak_rtol, run.contacts)
     R, M = masses.shape
     K = obs.shape[0]
     T = t_grid.shape[0]
@@ -133,8 +136,9 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
         pft = np.zeros(M - 1)
         grid_f = np.zeros(T)
         info = np.zeros(INFO_SIZE)
-        grid_c = np.zeros((T, run.contacts.shape[0]))
-        st = integrate_chain(method, Model(m, c, params), exit_run, State(x, v),
+        grid_c = np.zeros((T, sensed.shape[0]))
+        row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed)
+        st = integrate_chain(method, Model(m, c, params), row_run, State(x, v),
                              Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
         gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
         status[r] = st

@@ -30,8 +30,10 @@ Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force"])
 Model = namedtuple("Model", ["masses", "stiffness", "params"])
 
 #: A batch of chains of one size for the ensemble kernel: ``masses`` (R, M), ``stiffness`` (R, M-1),
-#: ``initial_velocity`` (R,) (the impulse on granule 1 of each row), and the :data:`Params` the rows share.
-Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "params"])
+#: ``initial_velocity`` (R,) (the impulse on granule 1 of each row), the :data:`Params` the rows share,
+#: and each row's time limit ``t_max`` (R,; a row's own, so that its result does not depend on the rows
+#: it is batched with: a precompressed chain runs to it).
+Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "params", "t_max"])
 
 #: The integration method: ``kind`` (``KIND_*`` below) and its settings ``params`` (float64,
 #: laid out by the kind: see ``dispatch.integrate_chain``).
