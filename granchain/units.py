@@ -452,6 +452,7 @@ VARIABLE_KINDS = {
     "peak_force": "force",
     "peak_force_time": "time",
     "wall_force": "force",
+    "sensor_force": "force",
     "peak_wall_force": "force",
     "peak_wall_force_time": "time",
 }
@@ -490,7 +491,9 @@ class PhysicalPulse:
     ``granule`` as in the result; ``peak_velocity`` (m/s), ``peak_time``, ``t_end``,
     ``exit_time`` (s); ``t_grid`` (s) and ``velocity`` (m/s) when the result has a grid;
     ``peak_force`` (N) and ``peak_force_time`` (s) when the result records contact forces
-    (per contact), else None. ``scale`` holds the units used.
+    (per contact), else None; ``dissipated_energy`` (J) of a viscoelastic chain, ``static_force`` (N)
+    of a precompressed one, ``sensor_force`` (N, sensor x time) when sensors were recorded (else
+    None). ``scale`` holds the units used.
     """
 
     scale: Scale
@@ -503,11 +506,15 @@ class PhysicalPulse:
     velocity: np.ndarray | None = None
     peak_force: np.ndarray | None = None
     peak_force_time: np.ndarray | None = None
+    dissipated_energy: float | None = None
+    static_force: float | None = None
+    sensor_force: np.ndarray | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready: arrays as lists, SI unit suffixes on the keys, ``None`` fields omitted."""
         units = {"peak_velocity": "m_s", "peak_time": "s", "t_end": "s", "exit_time": "s", "t_grid": "s",
-                 "velocity": "m_s", "peak_force": "N", "peak_force_time": "s"}
+                 "velocity": "m_s", "peak_force": "N", "peak_force_time": "s", "dissipated_energy": "J",
+                 "static_force": "N", "sensor_force": "N"}
         out = {}
         for f in fields(self):
             value = getattr(self, f.name)
@@ -541,6 +548,9 @@ def pulse_to_physical(result, scale: Scale) -> PhysicalPulse:
         velocity=_optional(scale, result, "velocity"),
         peak_force=_optional(scale, result, "peak_force"),
         peak_force_time=_optional(scale, result, "peak_force_time"),
+        dissipated_energy=float(scale.to_si(result.dissipated_energy, "energy")) if getattr(result, "dissipated_energy", 0.0) else None,
+        static_force=float(scale.to_si(result.static_force, "force")) if getattr(result, "static_force", 0.0) else None,
+        sensor_force=_optional(scale, result, "sensor_force"),
     )
 
 

@@ -190,7 +190,6 @@ class PulseResult:
                 "dissipated_energy": self.dissipated_energy, "static_force": self.chain.static_force,
             },
         )
-        ds.attrs["dissipated_energy_units"] = rescaled_attrs("energy")["units"]
         if self.integrator_record is not None:
             ds.attrs["integrator_record"] = json.dumps(self.integrator_record, sort_keys=True)
         if self.velocity is not None:

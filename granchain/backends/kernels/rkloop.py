@@ -427,6 +427,10 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                                 Kv[s, i] = Kv[s, i + d]
                         lo = new_lo
                         cut = True
+                        if damped:  # the power of the contacts still integrated (the next step's first stage)
+                            Pd[0] = accelerations(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:]),
+                                                  hi - lo, F, Kv[0])
+                            n_eval += 1
                 if relax_lag > 0 and front >= relax_lag:
                     relaxed = max(0, obs[front - relax_lag] - lo)
 
