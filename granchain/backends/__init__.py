@@ -104,6 +104,8 @@ class Backend:
             e0 = impulse_energy(masses[r, 0], initial_velocity[r])
             e1 = final_energy(x, v, masses[r], stiffness[r], model_params(chain), info) + info[INFO_DISSIPATED]
             out["energy_error"][r] = (e1 - e0) / e0
+            if "dissipated_energy" in out:
+                out["dissipated_energy"][r] = info[INFO_DISSIPATED]
             if st == 0:
                 out["n_valid"][0] += 1
                 accumulate_fixed_point(np.ascontiguousarray(grid_v), scale, out["sum_v"], out["sum_v2"])

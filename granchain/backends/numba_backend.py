@@ -126,7 +126,8 @@ class NumbaBackend(Backend):
                 Batch(masses, stiffness, initial_velocity, model_params(first), limits), method, run,
                 Tally(contacts, float(scale), lags),
                 Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
-                     out["status"], out["energy_error"], out["n_steps"], out["t_end"]),
+                     out["status"], out["energy_error"], out["n_steps"], out["t_end"],
+                     out["dissipated_energy"] if "dissipated_energy" in out else np.zeros(masses.shape[0])),
                 Sums(out["sum_v"], out["sum_v2"], out["sum_wall"], out["n_valid"], sum_a, sum_a2),
                 thread_sums(numba.get_num_threads(), t_grid.size, observed.shape[0], lags.size),
             )

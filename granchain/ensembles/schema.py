@@ -24,7 +24,7 @@ import numpy as np
 from .._status import NOT_COMPUTED, Status
 from ..units import RESCALED, rescaled_attrs
 
-__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "PROGRESS_SUMS",
+__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "DISSIPATION", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "PROGRESS_SUMS",
            "result_variables", "per_realisation_variables", "progress_sums", "progress_sum_variables", "chunk_variables",
            "averaged_variables", "progress_variables", "parameter_variables", "sizes", "checked_variables", "digest"]
 
@@ -88,10 +88,18 @@ WALL = (
 )
 
 
+#: Families with a viscoelastic contact law: the energy its contacts dissipated (the energy check,
+#: energy_error, includes it: (E_end + E_dissipated - E_0) / E_0).
+DISSIPATION = (
+    Variable("dissipated_energy", ("chain", "realization"), "float64", np.nan, rescaled_attrs("energy"),
+             "energy dissipated by the viscoelastic contacts"),
+)
+
+
 def result_variables(family) -> tuple:
     """The per-realisation results a family's store holds: :data:`RESULTS`, :data:`FORCES`, and
     :data:`WALL` when its chains end in a wall."""
-    return RESULTS + FORCES + (WALL if family.wall else ())
+    return RESULTS + FORCES + (WALL if family.wall else ()) + (DISSIPATION if family.contact_law.gamma > 0 else ())
 
 
 def per_realisation_variables(family) -> tuple:

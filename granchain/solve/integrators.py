@@ -125,7 +125,8 @@ class Integrator:
         Writes ``out["peak_velocity"]``/``["peak_time"]`` (R, K), ``["peak_force"]``/
         ``["peak_force_time"]`` (R, C) of the contacts ``contacts``, ``["peak_wall"]`` (R, 2: the
         wall's peak force and its time; only for chains ending in a wall), ``["status"]``,
-        ``["energy_error"]``, ``["n_steps"]``, ``["t_end"]`` (R,), adds the fixed-point
+        ``["energy_error"]``, ``["n_steps"]``, ``["t_end"]`` (R,) (and ``["dissipated_energy"]`` (R,)
+        when ``out`` has it), adds the fixed-point
         sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) (and of
         the wall force to ``["sum_wall"]`` (T,)) and counts them in ``["n_valid"]`` (1,). With
         ``out["lags"]`` (L,), also adds the aligned pulse's sums to ``["sum_a"]``/``["sum_a2"]``

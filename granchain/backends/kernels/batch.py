@@ -95,7 +95,7 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
     whose contacts never open).
 
     Per realisation writes (``rows``, ``records.Rows``) peak_v[r, :], peak_t[r, :], status[r],
-    energy_error[r] ((E_end + E_dissipated - E_0)/E_0), n_steps[r], t_end[r], the peak forces of the contacts
+    energy_error[r] ((E_end + E_dissipated - E_0)/E_0), dissipated[r] (E_dissipated), n_steps[r], t_end[r], the peak forces of the contacts
     ``tally.contacts`` (0-based) into peak_f[r, :], peak_ft[r, :] and, for chains ending in a wall, the
     wall's peak force and time into peak_wall[r, :] (untouched otherwise). Adds (``sums``,
     ``records.Sums``) round(v * scale) and round(v^2 * scale) of every successful realisation's
@@ -116,7 +116,7 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
     stop_at_exit, exit_margin, max_steps, peak_rtol, sensed = (run.stop_at_exit, run.exit_margin, run.max_steps,
                                                                run.peak_rtol, run.contacts)
     contacts, scale, lags = tally
-    peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end = rows
+    peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end, dissipated = rows
     sum_v, sum_v2, sum_wall, n_valid, sum_a, sum_a2 = sums
     acc1, acc2, accw, cnt, al1, al2 = partials
     R, M = masses.shape
@@ -145,6 +145,7 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
         n_steps[r] = np.int64(info[INFO_STEPS])
         t_end[r] = info[INFO_T_END]
         e0 = impulse_energy(m[0], v_init[r])
+        dissipated[r] = info[INFO_DISSIPATED]
         e1 = final_energy(x, v, m, c, params, info) + info[INFO_DISSIPATED]
         energy_error[r] = (e1 - e0) / e0
         if st == SUCCESS:
