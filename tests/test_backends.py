@@ -416,11 +416,11 @@ MODEL_FIELD_SCRIPT = textwrap.dedent(
     seen = []
 
     # Observe the model's parameters where the step loops hand them on (rkloop._rk_loop and
-    # verlet.verlet_integrate call peaks.initial_force_records(x, model, g, out, contacts)).
+    # verlet.verlet_integrate call peaks.initial_force_records(x, v, model, g, out, contacts)).
     def observed(original):
-        def initial_force_records(x, model, g, out, contacts):
+        def initial_force_records(x, v, model, g, out, contacts):
             seen.append(getattr(model.params, "probe", "absent"))
-            return original(x, model, g, out, contacts)
+            return original(x, v, model, g, out, contacts)
         return initial_force_records
 
     rkloop.initial_force_records = observed(peaks.initial_force_records)

@@ -128,7 +128,7 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     grid_v = np.zeros((t_grid.size, obs.size))  # time-major, as the kernels
     g = int(np.searchsorted(t_grid, 0.0, side="right"))
     grid_v[:g] = v0[obs]
-    peak_f = np.zeros(M - 1)
+    peak_f = np.array(forces(y0), dtype=float)  # the forces at t = 0: 0, or the static load (as the kernels)
     peak_ft = np.zeros(M - 1)
     grid_f = np.zeros(t_grid.size)
     grid_c = np.zeros((t_grid.size, sensed.size))

@@ -39,24 +39,24 @@ def initial_records(obs, v, t_grid, peak_v, peak_t, grid_v):
 
 
 @njit(**JIT)
-def initial_force_records(x, model, g, out, contacts):
-    """No contact has a force peak yet (0 at t = 0); with a wall, its force at the ``g`` grid times
-    <= 0 (the state at t = 0: the static load of a precompressed chain) into ``out.grid_f``."""
+def initial_force_records(x, v, model, g, out, contacts):
+    """The contact forces at t = 0 (the state (x, v)) are the first peak candidates, at time 0: 0 for an
+    unloaded chain, the static load of a precompressed one (the floor its peaks rise from); with a wall,
+    its force at the ``g`` grid times <= 0 into ``out.grid_f``, and the recorded ``contacts``'
+    (``Run.contacts``) into ``out.grid_c``."""
     M = x.shape[0]
-    for j in range(M - 1):
-        out.peak_f[j] = 0.0
-        out.peak_ft[j] = 0.0
     p = model.params
+    c = model.stiffness
+    for j in range(M - 1):
+        d0, _ = static_state(c[j], p)
+        out.peak_f[j] = law_force(d0 + (x[j] - x[j + 1]), v[j] - v[j + 1], c[j], p)
+        out.peak_ft[j] = 0.0
     if p.wall:
-        c = model.stiffness[M - 2]
-        d0, _ = static_state(c, p)
         for gg in range(g):
-            out.grid_f[gg] = law_force(d0 + (x[M - 2] - x[M - 1]), 0.0, c, p)
-    for s in range(out.grid_c.shape[1]):  # recorded contacts (Run.contacts): their force at t = 0
-        j = contacts[s]
-        d0, _ = static_state(model.stiffness[j], p)
+            out.grid_f[gg] = out.peak_f[M - 2]
+    for s in range(out.grid_c.shape[1]):
         for gg in range(g):
-            out.grid_c[gg, s] = law_force(d0 + (x[j] - x[j + 1]), 0.0, model.stiffness[j], p)
+            out.grid_c[gg, s] = out.peak_f[contacts[s]]
 
 
 @njit(**JIT)

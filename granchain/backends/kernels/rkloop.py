@@ -253,7 +253,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    initial_force_records(x[:M], model, g, out, run.contacts)
+    initial_force_records(x[:M], v[:M], model, g, out, run.contacts)
 
     h = h_fixed if h_fixed > 0.0 else steps.first_step
     err_old = 1e-4
@@ -300,6 +300,8 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
             err = 0.0
             if h_fixed <= 0.0:
                 err = error_norm(method, X, V, XS, VS, Kx, Kv, h, hp, relaxed, steps, ratio)
+                if damped:
+                    err = max(err, dp5.dissipated_error_ratio(Pd, h, dissipated, steps.rtol, steps.atol))
                 if not math.isfinite(err):
                     status = NONFINITE
                     break
@@ -382,8 +384,8 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                         grid_v[g, q] = v[obs[q]]
                     else:
                         grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
-                if p.wall:  # the total force on the wall (the static load included)
-                    grid_f[g] = dense_force(M - 2 - lo, step, FM, Q, QV) if M - 2 < hi else 0.0
+                if p.wall:  # the total force on the wall (the static load included; only that until the pulse is near)
+                    grid_f[g] = dense_force(M - 2 - lo, step, FM, Q, QV) if M - 2 < hi else f0p[M - 2]
                 for s in range(n_sensed):  # granules past the window are at rest: the force is exact there too
                     j = sensed[s] - lo
                     out.grid_c[g, s] = dense_force(j, step, FM, Q, QV) if j >= 0 else math.nan

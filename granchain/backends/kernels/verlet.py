@@ -85,7 +85,7 @@ def verlet_integrate(h, model, run, state, out):
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
     t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    initial_force_records(x, model, g, out, run.contacts)
+    initial_force_records(x, v, model, g, out, run.contacts)
     exit_since = -1.0
     n_acc = 0
     status = -1
@@ -132,7 +132,7 @@ def verlet_integrate(h, model, run, state, out):
                 k = obs[q]
                 grid_v[g, q] = hermite(v_old[k], a[k], v[k], a_new[k], dt, theta) if k < hi else 0.0
             if p.wall:
-                grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, p, o) if M - 2 < hi else 0.0
+                grid_f[g] = _hermite_force(M - 2, x_old, v_old, x, v, dt, theta, c, p, o) if M - 2 < hi else f0[M - 2]
             for s in range(run.contacts.shape[0]):  # granules past the window are at rest: exact there too
                 out.grid_c[g, s] = _hermite_force(run.contacts[s], x_old, v_old, x, v, dt, theta, c, p, o)
             g += 1
