@@ -173,7 +173,7 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
     vprev = np.zeros(n_obs)
     peaked = np.zeros(n_obs, np.bool_)
     fm = _forces(cm, im)
-    accelerations(x, v, fm, M, F, a)
+    accelerations(x, v, fm, M, F, a, False)
     front = -1
     relaxed = 0
     for q in range(n_obs):
@@ -193,13 +193,13 @@ def integrate(m, c, obs, x0, v0, t_grid, rtol, atol, relax_lag, factor, fast_mas
         h2 = h * h
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C1 * v[i]) + h2 * (_rkn.A10 * a[i])
-        accelerations(xs, v, fm, M, F, f1)
+        accelerations(xs, v, fm, M, F, f1, False)
         for i in range(M):
             xs[i] = x[i] + h * (_rkn.C2 * v[i]) + h2 * (_rkn.A20 * a[i] + _rkn.A21 * f1[i])
-        accelerations(xs, v, fm, M, F, f2)
+        accelerations(xs, v, fm, M, F, f2, False)
         for i in range(M):
             xs[i] = x[i] + h * v[i] + h2 * (_rkn.B0 * a[i] + _rkn.B1 * f1[i] + _rkn.B2 * f2[i])
-        accelerations(xs, v, fm, M, F, f3)
+        accelerations(xs, v, fm, M, F, f3, False)
         err = 0.0
         for i in range(M):
             vs[i] = v[i] + h * (_rkn.P0 * a[i] + _rkn.P1 * f1[i] + _rkn.P2 * f2[i] + _rkn.P3 * f3[i])

@@ -128,8 +128,14 @@ def _resolve_in_enclosing_packages(app, env, node, contnode):
     target, module = node["reftarget"], node.get("py:module") or ""
     domain = env.get_domain("py")
     parts = module.split(".")
-    for i in range(len(parts) - 1, 0, -1):
-        candidate = ".".join(parts[:i] + [target])
+    scopes = [".".join(parts[:i]) for i in range(len(parts) - 1, 0, -1)]
+    # A docstring documented under a re-exported name (``granchain.Chain.with_striker``) is read in
+    # the module that wrote it (``granchain.model.chain``), where its short names live: autodoc
+    # records that origin in the node's source ("...:docstring of granchain.model.chain.Chain.with_striker").
+    origin = (node.source or "").rpartition("docstring of ")[2].split(".") if "docstring of " in (node.source or "") else []
+    scopes += [".".join(origin[:i]) for i in range(len(origin) - 1, 0, -1)]
+    for scope in dict.fromkeys(scopes):
+        candidate = f"{scope}.{target}"
         if candidate in domain.objects:
             return domain.resolve_xref(env, node["refdoc"], app.builder, node["reftype"], candidate, node, contnode)
     return None

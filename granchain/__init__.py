@@ -25,7 +25,18 @@ from .families import (
     family_from_dataset,
     family_from_record,
 )
-from .ensembles.run import ENSEMBLE_ATOL, ENSEMBLE_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, EnsembleSpec, default_time_grid, ensemble_integrator, run_ensemble
+from .ensembles.run import (
+    DAMPED_ATOL,
+    DAMPED_RTOL,
+    ENSEMBLE_ATOL,
+    ENSEMBLE_RTOL,
+    SMOOTH_ATOL,
+    SMOOTH_RTOL,
+    EnsembleSpec,
+    default_time_grid,
+    ensemble_integrator,
+    run_ensemble,
+)
 from .ensembles.read import open_store
 from .units import Material, Scale, scale, to_physical  # physical units; the rest in granchain.units
 
@@ -38,6 +49,8 @@ __all__ = [
     "DP5",
     "RKN4",
     "EFFECTIVE_VALIDITY_LIMIT",
+    "DAMPED_ATOL",
+    "DAMPED_RTOL",
     "ENSEMBLE_ATOL",
     "ENSEMBLE_RTOL",
     "SMOOTH_ATOL",

@@ -350,7 +350,7 @@ class Scale:
         word = {"velocity": "speed", "radius": "length"}.get(kind, kind)
         return si_value(value, word, f"a {kind}") / getattr(self, kind)
 
-    def wave_speed(self, granules_per_time: float, spacing: float = 2.0) -> float:
+    def wave_speed_si(self, granules_per_time: float, spacing: float = 2.0) -> float:
         """A speed in granules per unit time (``PulseResult.wave_speed``) in m/s: ``spacing`` is the
         distance between neighbouring granules' centres in units of the reference radius (2 for a
         monodisperse chain of the reference granules; the static overlaps, ~1e-4 of it, are neglected)."""

@@ -2,8 +2,8 @@
 
 C. Daraio, V. F. Nesterenko, E. B. Herbold and S. Jin, Phys. Rev. E 73, 026610 (2006) measured the
 speed of solitary waves against their force amplitude in chains of stainless-steel beads
-(``granchain.units.STAINLESS_STEEL``: E = 193 GPa, nu = 0.3, rho = 8000 kg/m^3; diameter
-D = 4.76 mm), without and with a static load, and found it in agreement with Nesterenko's
+(``granchain.units.STAINLESS_STEEL``: E = 193 GPa, nu = 0.3, rho = 8000 kg/m^3; here beads of
+D = 4.76 mm, 3/16 in, a standard bearing-ball size), without and with a static load, and found it in agreement with Nesterenko's
 long-wavelength theory (as did C. Coste, E. Falcon and S. Fauve, Phys. Rev. E 56, 6104 (1997), with
 steel beads). The measured points themselves are not available to this test-suite (only the papers'
 abstracts could be consulted), so what is checked here is the chain of conversions that a comparison
@@ -56,7 +56,7 @@ def measured(chain: gc.Chain, scale, first: int = 21, last: int = 40):
     peak force of the contacts there (total force, static load included, as a gauge measures it)."""
     res = gc.simulate(chain, gc.DP5(1e-10, 1e-12))
     assert res.ok
-    speed = scale.wave_speed(res.wave_speed(first, last))
+    speed = scale.wave_speed_si(res.wave_speed(first, last))
     return speed, float(np.mean(res.peak_force[first - 1:last - 1])) * scale.force
 
 

@@ -55,8 +55,9 @@ BOXES = {
     "units": (8.6, 2.0, 4.9, 1.6, UNITS, False, "granchain.units",
               "physical units (paper Sec. II\nrescaling): the units attributes\nof every result"),
     "model": (0.4, 0.2, 15.2, 1.3, CORE, False, "granchain.model",
-              "what a chain is, as values: contacts (PowerLaw, FreeEnd, RigidWall, Impulse), chain (Chain and "
-              "its builders),\neffective (the effective chain), distributions, random (chains drawn from (seed, i))"),
+              "what a chain is, as values: contacts (PowerLaw, Viscoelastic, Precompression, FreeEnd, LoadedEnd, "
+              "RigidWall, Impulse, Striker),\ncollision (restitution), chain (Chain and its builders), effective, "
+              "distributions, random (chains drawn from (seed, i))"),
 }
 
 #: (from, to, start (x, y), end (x, y), label, label position (x, y), label alignment)

@@ -146,7 +146,11 @@ def run(args) -> int:
         chain = gc.from_radii(_floats(args.radii, "--radii"), n=args.n)
     if args.wall:
         material = contacts["wall_material"]
-        chain = chain.with_wall(material=material) if material is not None else chain.with_wall()
+        if material is not None and units is None:
+            raise ValueError("--wall-material is stiff relative to the beads' material: give the physical-unit options "
+                             "too (--material or --E/--nu/--rho, --radius, --impact-speed)")
+        chain = (chain.with_wall(material=material, granules=units.material) if material is not None
+                 else chain.with_wall())
     chain = apply_to_chain(chain, contacts)
     sensors = None if args.sensor is None else [int(k) for k in _floats(args.sensor, "--sensor")]
     grid = None

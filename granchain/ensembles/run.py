@@ -28,7 +28,8 @@ from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrat
 from ..solve.simulation import linear_crossing_time, time_limit
 from .store import WALL, MemorySink, Variable, ZarrSink
 
-__all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL", "ensemble_integrator"]
+__all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL",
+           "DAMPED_RTOL", "DAMPED_ATOL", "ensemble_integrator"]
 
 #: Ensemble defaults: the relaxed zone behind the pulse (:meth:`DP5.relaxed`), with the
 #: Runge-Kutta-Nystrom pair :class:`RKN4` at ENSEMBLE_RTOL / ENSEMBLE_ATOL for decorated chains and DP5

@@ -231,7 +231,8 @@ class Chain:
         struck end, held at the far end by the wall if there is one, else by the same force).
 
         ``force`` may be a quantity with units (``"2 N"``) only through ``granchain.units``
-        (:meth:`granchain.units.Scale.rescaled_force`), which knows the force unit."""
+        (``scale.to_rescaled("2 N", "force")``, :meth:`granchain.units.Scale.to_rescaled`), which knows the
+        force unit."""
         if self.n <= 1.0:
             raise ValueError(f"precompression needs an exponent n > 1 (a contact that stiffens as it is compressed), got n = {self.n:g}")
         return self.replace(static_force=Precompression(force))
@@ -251,22 +252,25 @@ class Chain:
                      material=None) -> "Chain":
         """The same chain struck by a free sphere instead of an initial velocity on granule 1.
 
-        Give the striker's ``mass`` (rescaled: granule 1's mass is 1) or its ``radius`` (rescaled),
-        and its ``velocity`` (default: this chain's ``initial_velocity``). The striker is a sphere of
-        granule 1's material (or of ``material``, a :class:`granchain.units.Material`, with
-        ``materials`` of the chain given in ``meta``): its contact with granule 1 follows Eq. (r-prime)
-        (Hertz, effective modulus and radius of the pair, :func:`material_stiffness`); of a ``mass``
-        alone, the radius is that of a sphere of that mass. It sits in front of granule 1, just
-        touching it (carrying the static load of a precompressed chain), and is launched at t = 0.
-        Granule labels keep their meaning (granule 1 is the first after the striker), and the
-        striker is not observed unless asked (:meth:`with_observed`, index 0)."""
+        Give the striker's ``mass`` or its ``radius`` (rescaled: the reference granule, of radius 1,
+        has mass 1) and its ``velocity`` (default: this chain's ``initial_velocity``). The striker is a
+        sphere of granule 1's material, or of ``material`` (a :class:`granchain.units.Material`) for a
+        chain built with ``materials=``: its contact with granule 1 is Hertz's for the pair (Eq. r-prime;
+        :func:`material_stiffness` for two materials); of a ``mass`` alone, the radius is that of a
+        sphere of that mass. It sits in front of granule 1, just touching it (carrying the static load
+        of a precompressed chain), and is launched at t = 0. Granule labels keep their meaning
+        (granule 1 is the first after the striker), and the striker is not observed unless asked
+        (:meth:`with_observed`, array index 0)."""
         if self.striker:
             raise ValueError("this chain already has a striker")
         if (mass is None) == (radius is None):
             raise ValueError("give the striker's mass or its radius (rescaled: granule 1 has mass 1 and radius 1)")
         mats = self.meta.get("materials")
+        if material is not None and not mats:
+            raise ValueError("a striker of another material needs the chain's own materials: build it with "
+                             "granchain.from_radii(radii, materials=...)")
         ref = mats[0] if mats else None
-        smat = material if material is not None else ref
+        smat = _material(material) if material is not None else ref
         rho = 1.0 if smat is None or ref is None else smat.rho / ref.rho
         if radius is not None:
             r_s = finite_scalar("striker radius", radius, positive=True)
@@ -298,15 +302,17 @@ class Chain:
         granules lose the wall's impulse, :attr:`granchain.PulseResult.wall_impulse`)."""
         return self.initial.momentum(self.masses)
 
-    def with_wall(self, stiffness: float | None = None, *, material=None) -> "Chain":
+    def with_wall(self, stiffness: float | None = None, *, material=None, granules=None) -> "Chain":
         """The same chain ending in a wall: one more granule, of infinite mass (it does not move).
 
         The wall contact's stiffness is ``stiffness`` or, for a chain built from radii,
         sqrt(2 R_M) (:func:`wall_stiffness`, the limit of Eq. r-prime: a flat wall of the last
         granule's material). ``material`` (a :class:`granchain.units.Material`, or ``"rigid"`` for an
         infinitely stiff wall) makes it an elastic wall of its own material: Hertz's effective
-        modulus of the pair and the sphere's radius (:func:`material_wall_stiffness`). A chain without
-        radii (e.g. an effective chain) needs ``stiffness``.
+        modulus of the pair and the sphere's radius (:func:`material_wall_stiffness`), relative to the
+        granules' material: that of a chain built with ``materials=``, else ``granules`` (the one
+        material of the chain's granules, the material of its physical units). A chain without radii
+        (e.g. an effective chain) needs ``stiffness``.
         """
         if self.wall:
             raise ValueError("this chain already ends in a wall")
@@ -316,12 +322,17 @@ class Chain:
             if self.radii is None:
                 raise ValueError(f"a {self.kind} chain has no radii to give an elastic wall its contact: pass stiffness=...")
             mats = self.meta.get("materials")
-            from ..units import STEEL
-
-            ref = mats[0] if mats else None
-            last = mats[-1] if mats else None
-            if ref is None:  # one material, unnamed: the wall's modulus relative to the granules' own
-                ref = last = self.meta.get("material", STEEL)
+            if mats:
+                if granules is not None:
+                    raise ValueError("this chain was built with materials=...: its granules' materials are known, "
+                                     "do not give granules=")
+                ref, last = mats[0], mats[-1]
+            elif granules is None:
+                raise ValueError("a wall of another material is stiff relative to the granules' material: give it "
+                                 "(with_wall(material=..., granules=...), the material of the chain's physical "
+                                 "units), or build the chain with from_radii(radii, materials=...)")
+            else:
+                ref = last = _material(granules)
             stiffness = material_wall_stiffness(self.radii[-1], last, material, reference=ref)
         elif stiffness is None and self.meta.get("materials") and self.radii is not None:
             mats = self.meta["materials"]  # a flat wall of the last granule's material, relative to granule 1's

@@ -21,7 +21,6 @@ from ..backends.kernels.records import (
 )
 from ..model.chain import Chain
 from ..units import rescaled_attrs
-from ..backends import numba_backend
 from .integrators import RunControls, get_integrator
 
 __all__ = ["Status", "PulseResult", "simulate", "default_t_max"]
@@ -101,15 +100,21 @@ class PulseResult:
         """Per contact, the peak force less the static load F0 (``peak_force`` without precompression)."""
         return None if self.peak_force is None else self.peak_force - self.chain.static_force
 
-    def sensor_peak(self) -> tuple[np.ndarray, np.ndarray]:
+    def sensor_peak(self, until: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(peak force, its time) of each sensor granule's force (:attr:`sensor_force`), the grid sample
         of the maximum refined by the parabola through it and its two neighbours (exact for a smooth
-        peak to O(dt^3)): the quantity the embedded-gauge experiments report."""
+        peak to O(dt^3)): the quantity the embedded-gauge experiments report. ``until``: only grid times
+        up to it (the first passage of the pulse, before a wall or a loaded end sends it back through
+        the sensor; by default the whole run)."""
         if self.sensor_force is None:
             raise ValueError("no sensor was recorded: simulate(..., t_grid=..., sensors=[k, ...])")
         t = self.t_grid
+        end = t.size if until is None else int(np.searchsorted(t, until, side="right"))
+        if end < 3:
+            raise ValueError(f"until = {until!r} leaves fewer than 3 grid times: the peak needs the pulse's passage")
+        t = t[:end]
         peaks, times = [], []
-        for f in self.sensor_force:
+        for f in self.sensor_force[:, :end]:
             i = int(np.nanargmax(f))
             if 0 < i < f.size - 1 and np.isfinite(f[i - 1:i + 2]).all():
                 den = f[i - 1] - 2.0 * f[i] + f[i + 1]
@@ -168,6 +173,8 @@ class PulseResult:
             + (f"momentum error {self.momentum_error:.2e}" if not self.chain.wall else
                f"wall: peak force {self.peak_wall_force:.9g} at t = {self.peak_wall_force_time:.6f}, impulse {self.wall_impulse:.9g}")
         )
+        if not self.chain.ends_at_exit:
+            lines.append("# precompressed: the loaded contacts do not open, so the run ends at t_max, not at the pulse's exit")
         if self.integrator_record and "goal_control" in self.integrator_record:
             lines.append(f"# goal-oriented error control {self.integrator_record['goal_control']}")
         return "\n".join(lines)
@@ -309,6 +316,8 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         warnings.warn(f"simulate: the integration did not succeed: {Status(status).name} ({Status(status).message}); "
                       "check result.status before using the peaks", RuntimeWarning, stacklevel=2)
     e0, p0 = chain.energy, chain.momentum
+    from ..backends import numba_backend  # (imported on first use: importing granchain does not load the backends)
+
     dissipated = float(info[INFO_DISSIPATED])
     e1 = final_energy(x, v, chain.masses, chain.stiffness, numba_backend.model_params(chain), info) + dissipated
     p1 = total_momentum(v, chain.masses)

@@ -61,39 +61,54 @@ E1, E3, E4, E5, E6, E7 = E[0], E[2], E[3], E[4], E[5], E[6]
 
 
 @njit(**JIT_INLINE)
-def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F, Pd):
+def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F, Pd, general):
     """Stages 2..7 of one step over granules 0..hi-1, unrolled.
 
     Kx[s] are the stage velocities (dx/dt), Kv[s] the stage accelerations, Pd[s] the power the
     contacts dissipate at the stage (0 for elastic contacts; a viscoelastic force reads the stage
     velocities Kx[s]); ``fm``: the forces' parameters (``records.Forces``). On return xs, vs hold the
-    5th-order solution and Kx[6], Kv[6], Pd[6] its derivative.
+    5th-order solution and Kx[6], Kv[6], Pd[6] its derivative. ``general``: see ``forces.accelerations``;
+    the paper's chain (``general`` False) reads no velocities and dissipates nothing, so it gets ``v``
+    rather than a view of the stage velocities and writes no power: its compiled stages are those of
+    DP5 before real contacts.
     """
     for i in range(hi):
         xs[i] = x[i] + h * (A21 * Kx[0, i])
         Kx[1, i] = v[i] + h * (A21 * Kv[0, i])
-    Pd[1] = accelerations(xs, Kx[1], fm, hi, F, Kv[1])
+    power = accelerations(xs, Kx[1] if general else v, fm, hi, F, Kv[1], general)
+    if general:
+        Pd[1] = power
     for i in range(hi):
         xs[i] = x[i] + h * (A31 * Kx[0, i] + A32 * Kx[1, i])
         Kx[2, i] = v[i] + h * (A31 * Kv[0, i] + A32 * Kv[1, i])
-    Pd[2] = accelerations(xs, Kx[2], fm, hi, F, Kv[2])
+    power = accelerations(xs, Kx[2] if general else v, fm, hi, F, Kv[2], general)
+    if general:
+        Pd[2] = power
     for i in range(hi):
         xs[i] = x[i] + h * (A41 * Kx[0, i] + A42 * Kx[1, i] + A43 * Kx[2, i])
         Kx[3, i] = v[i] + h * (A41 * Kv[0, i] + A42 * Kv[1, i] + A43 * Kv[2, i])
-    Pd[3] = accelerations(xs, Kx[3], fm, hi, F, Kv[3])
+    power = accelerations(xs, Kx[3] if general else v, fm, hi, F, Kv[3], general)
+    if general:
+        Pd[3] = power
     for i in range(hi):
         xs[i] = x[i] + h * (A51 * Kx[0, i] + A52 * Kx[1, i] + A53 * Kx[2, i] + A54 * Kx[3, i])
         Kx[4, i] = v[i] + h * (A51 * Kv[0, i] + A52 * Kv[1, i] + A53 * Kv[2, i] + A54 * Kv[3, i])
-    Pd[4] = accelerations(xs, Kx[4], fm, hi, F, Kv[4])
+    power = accelerations(xs, Kx[4] if general else v, fm, hi, F, Kv[4], general)
+    if general:
+        Pd[4] = power
     for i in range(hi):
         xs[i] = x[i] + h * (A61 * Kx[0, i] + A62 * Kx[1, i] + A63 * Kx[2, i] + A64 * Kx[3, i] + A65 * Kx[4, i])
         Kx[5, i] = v[i] + h * (A61 * Kv[0, i] + A62 * Kv[1, i] + A63 * Kv[2, i] + A64 * Kv[3, i] + A65 * Kv[4, i])
-    Pd[5] = accelerations(xs, Kx[5], fm, hi, F, Kv[5])
+    power = accelerations(xs, Kx[5] if general else v, fm, hi, F, Kv[5], general)
+    if general:
+        Pd[5] = power
     for i in range(hi):
         xs[i] = x[i] + h * (B1 * Kx[0, i] + B3 * Kx[2, i] + B4 * Kx[3, i] + B5 * Kx[4, i] + B6 * Kx[5, i])
         vs[i] = v[i] + h * (B1 * Kv[0, i] + B3 * Kv[2, i] + B4 * Kv[3, i] + B5 * Kv[4, i] + B6 * Kv[5, i])
         Kx[6, i] = vs[i]
-    Pd[6] = accelerations(xs, Kx[6], fm, hi, F, Kv[6])
+    power = accelerations(xs, Kx[6] if general else v, fm, hi, F, Kv[6], general)
+    if general:
+        Pd[6] = power
 
 
 @njit(**JIT_INLINE)

@@ -183,8 +183,14 @@ def rk_integrate(method, steps, model, run, state, out):
     scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
                borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen), borrowed(op), borrowed(f0p),
                borrowed(Pd))
+    general = model.params.gamma > 0.0 or model.params.static_force > 0.0  # real contacts (forces.accelerations)
     if method == KIND_RKN4:
-        status = _rkn4_loop(steps, bmodel, brun, bstate, bout, scratch)
+        if general:
+            status = _rkn4_loop_general(steps, bmodel, brun, bstate, bout, scratch)
+        else:
+            status = _rkn4_loop(steps, bmodel, brun, bstate, bout, scratch)
+    elif general:
+        status = _dp5_loop_general(steps, bmodel, brun, bstate, bout, scratch)
     else:
         status = _dp5_loop(steps, bmodel, brun, bstate, bout, scratch)
     keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd)
@@ -195,21 +201,34 @@ def rk_integrate(method, steps, model, run, state, out):
 
 @njit(**JIT)
 def _dp5_loop(steps, model, run, state, out, scratch):
-    """:func:`_rk_loop` with DP5."""
-    return _rk_loop(KIND_DP5, steps, model, run, state, out, scratch)
+    """:func:`_rk_loop` with DP5, for the paper's chain."""
+    return _rk_loop(KIND_DP5, False, steps, model, run, state, out, scratch)
+
+
+@njit(**JIT)
+def _dp5_loop_general(steps, model, run, state, out, scratch):
+    """:func:`_rk_loop` with DP5, for real contacts."""
+    return _rk_loop(KIND_DP5, True, steps, model, run, state, out, scratch)
 
 
 @njit(**JIT)
 def _rkn4_loop(steps, model, run, state, out, scratch):
-    """:func:`_rk_loop` with RKN4(3)."""
-    return _rk_loop(KIND_RKN4, steps, model, run, state, out, scratch)
+    """:func:`_rk_loop` with RKN4(3), for the paper's chain."""
+    return _rk_loop(KIND_RKN4, False, steps, model, run, state, out, scratch)
 
 
-# Inlined into the two loops above, each with its method a constant, so that the compiler drops the
-# other method's branches (compiled once with the method a run-time value, the loop cost DP5 ~6 %
-# more per realisation, same-process timing at N = 26).
+@njit(**JIT)
+def _rkn4_loop_general(steps, model, run, state, out, scratch):
+    """:func:`_rk_loop` with RKN4(3), for real contacts (a static load: RKN4 refuses damping)."""
+    return _rk_loop(KIND_RKN4, True, steps, model, run, state, out, scratch)
+
+
+# Inlined into the four loops above, each with its method and ``general`` constants, so that the
+# compiler drops the other method's branches (compiled once with the method a run-time value, the loop
+# cost DP5 ~6 % more per realisation, same-process timing at N = 26) and, for the paper's chain, the
+# code of the real contacts (see forces.accelerations).
 @njit(**JIT_INLINE)
-def _rk_loop(method, steps, model, run, state, out, scratch):
+def _rk_loop(method, general, steps, model, run, state, out, scratch):
     """The step loop of :func:`rk_integrate`, on borrowed arrays (``memory.borrowed``: no reference
     counting in the loop): its records, with the state (x, v), the stiffness and the inverse masses
     ``inv_m`` = 1 / m in the padded layout (length Mp = M + LANES, see :data:`LANES`), and the zeroed
@@ -237,11 +256,11 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
     QV = Qv if method == KIND_RKN4 else Q  # velocity weights (see dense.weights)
     alpha = ALPHA_RKN4 if method == KIND_RKN4 else ALPHA  # PI controller exponent of the error estimate
     goal = relax_lag > 0 or window_lag > 0
-    damped = p.gamma > 0.0
+    damped = general and p.gamma > 0.0
     ahead = margin(p)
     lo = 0
     hi = initial_window(x[:M], v[:M], ahead)
-    Pd[0] = accelerations(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0])
+    Pd[0] = accelerations(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0], general)
     for i in range(hi):
         Kx[0, i] = v[i]
     n_eval = 1
@@ -290,10 +309,10 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
             # The stages (DP5: 2..7, RKN4: 1..3; the last is the new solution's, reused as the first
             # next step).
             if method == KIND_RKN4:
-                rkn4.stages(X, V, Kv, XS, VS, h, hp, FM, F)
+                rkn4.stages(X, V, Kv, XS, VS, h, hp, FM, F, general)
                 n_eval += 3
             else:
-                dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F, Pd)
+                dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F, Pd, general)
                 n_eval += 6
             # xs, vs now hold the new solution at t + h (DP5: 5th order; RKN4: 4th order).
             accept = True
@@ -408,7 +427,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                 new_hi = lo + advance_window(XM, VM, hw, ahead)
                 if new_hi > hi:
                     hi = new_hi
-                    Pd[0] = accelerations(X, V, FM, hi - lo, F, Kv[0])
+                    Pd[0] = accelerations(X, V, FM, hi - lo, F, Kv[0], general)
                     for i in range(hi - lo):
                         Kx[0, i] = V[i]
                     n_eval += 1
@@ -431,7 +450,7 @@ def _rk_loop(method, steps, model, run, state, out, scratch):
                         cut = True
                         if damped:  # the power of the contacts still integrated (the next step's first stage)
                             Pd[0] = accelerations(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:]),
-                                                  hi - lo, F, Kv[0])
+                                                  hi - lo, F, Kv[0], general)
                             n_eval += 1
                 if relax_lag > 0 and front >= relax_lag:
                     relaxed = max(0, obs[front - relax_lag] - lo)

@@ -50,19 +50,19 @@ LAST = 3
 
 
 @njit(**JIT_INLINE)
-def stages(x, v, Kv, xs, vs, h, hi, fm, F):
+def stages(x, v, Kv, xs, vs, h, hi, fm, F, general):
     """Stages 1..3 of one step over granules 0..hi-1 (``Kv[0]`` holds f(x)); on return ``xs``, ``vs``
     hold the new state and ``Kv[3]`` the force per mass there (three force evaluations)."""
     h2 = h * h
     for i in range(hi):
         xs[i] = x[i] + h * (C1 * v[i]) + h2 * (A10 * Kv[0, i])
-    accelerations(xs, v, fm, hi, F, Kv[1])  # forces of positions only: v unread
+    accelerations(xs, v, fm, hi, F, Kv[1], general)  # forces of positions only: v unread
     for i in range(hi):
         xs[i] = x[i] + h * (C2 * v[i]) + h2 * (A20 * Kv[0, i] + A21 * Kv[1, i])
-    accelerations(xs, v, fm, hi, F, Kv[2])  # forces of positions only: v unread
+    accelerations(xs, v, fm, hi, F, Kv[2], general)  # forces of positions only: v unread
     for i in range(hi):
         xs[i] = x[i] + h * v[i] + h2 * (B0 * Kv[0, i] + B1 * Kv[1, i] + B2 * Kv[2, i])
-    accelerations(xs, v, fm, hi, F, Kv[3])  # forces of positions only: v unread
+    accelerations(xs, v, fm, hi, F, Kv[3], general)  # forces of positions only: v unread
     for i in range(hi):
         vs[i] = v[i] + h * (P0 * Kv[0, i] + P1 * Kv[1, i] + P2 * Kv[2, i] + P3 * Kv[3, i])
 

@@ -79,8 +79,9 @@ def verlet_integrate(h, model, run, state, out):
     x_old = np.zeros(M)
     F = np.zeros(M + 1)  # contact forces, F[j + 1] for contact j (see forces.accelerations)
     ahead = margin(p)
+    general = p.static_force > 0.0  # (a run-time value here: see forces.accelerations)
     hi = initial_window(x, v, ahead)
-    accelerations(x, v, fm, hi, F, a)
+    accelerations(x, v, fm, hi, F, a, general)
     n_eval = 1
     t = 0.0
     g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
@@ -103,7 +104,7 @@ def verlet_integrate(h, model, run, state, out):
             v_old[i] = v[i]
             x_old[i] = x[i]
             x[i] += dt * v[i] + 0.5 * dt * dt * a[i]
-        accelerations(x, v, fm, hi, F, a_new)  # forces of positions only (Verlet refuses others): v unread
+        accelerations(x, v, fm, hi, F, a_new, general)  # forces of positions only (Verlet refuses others): v unread
         n_eval += 1
         for i in range(hi):
             v[i] += 0.5 * dt * (a[i] + a_new[i])
@@ -146,7 +147,7 @@ def verlet_integrate(h, model, run, state, out):
         new_hi = advance_window(x, v, hi, ahead)
         if new_hi > hi:
             hi = new_hi
-            accelerations(x, v, fm, hi, F, a)
+            accelerations(x, v, fm, hi, F, a, general)
             n_eval += 1
         status, exit_since = end_of_step(x, v, m, p.wall, hi, t, run, exit_since, t_needed)
         if status >= 0:
