@@ -49,6 +49,19 @@ class StoreLock:
         except (OSError, ValueError):
             return None
 
+    def _current_holder(self, patience: float = 1.0):
+        """The record of the process that holds the lock. It writes its record just after taking the lock,
+        so a process refused in between would read an empty file (or the record a previous writer left,
+        marked released) and could not name the holder: wait up to ``patience`` seconds for it."""
+        import time
+
+        deadline = time.monotonic() + patience
+        while True:
+            holder = self.holder()
+            if (isinstance(holder, dict) and not holder.get("released")) or time.monotonic() > deadline:
+                return holder
+            time.sleep(0.01)
+
     def _record(self) -> bytes:
         return json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
                            "since": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}).encode()
@@ -72,7 +85,7 @@ class StoreLock:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            self._refuse(self.holder())
+            self._refuse(self._current_holder())
         except OSError as exc:
             os.close(fd)
             if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
