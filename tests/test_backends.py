@@ -357,12 +357,14 @@ def long_signatures(functions: dict, limit: int = MAX_POSITIONAL) -> dict:
 
 
 #: The compiled entry points: what the Numba backend calls (one chain, a batch) and the per-method
-#: kernels ``dispatch.integrate_chain`` hands a chain to, down to the step loops. These are the
+#: kernels ``dispatch.chain_kernel`` picks for a chain (one per method and model class), down to the step loops. These are the
 #: signatures a new physics parameter used to be threaded through. (The small inlined helpers
 #: below them, e.g. the Runge-Kutta stages and error ratios over a window's arrays, take their
 #: arrays one by one: they are the loops' bodies, not seams.)
-ENTRY_POINTS = ("dispatch.integrate_chain", "batch.integrate_batch", "rkloop.rk_integrate", "rkloop._dp5_loop",
-                "rkloop._rkn4_loop", "rkloop._rk_loop", "verlet.verlet_integrate")
+CHAIN_KERNELS = ("dispatch.dp5_chain", "dispatch.dp5_chain_general", "dispatch.rkn4_chain", "dispatch.rkn4_chain_general",
+                 "dispatch.verlet_chain")
+ENTRY_POINTS = CHAIN_KERNELS + ("batch.integrate_batch", "rkloop.rk_integrate", "rkloop.dp5_loop", "rkloop.dp5_loop_general",
+                                "rkloop.rkn4_loop", "rkloop.rkn4_loop_general", "rkloop._rk_loop", "verlet.verlet_integrate")
 
 
 def test_no_compiled_entry_point_takes_more_than_8_positional_parameters():
@@ -374,7 +376,7 @@ def test_no_compiled_entry_point_takes_more_than_8_positional_parameters():
     functions = compiled_functions(kernels)
     assert len(functions) >= 40
     entry = {f"granchain.backends.kernels.{name}": functions[f"granchain.backends.kernels.{name}"] for name in ENTRY_POINTS}
-    source = inspect.getsource(functions["granchain.backends.kernels.dispatch.integrate_chain"].py_func)
+    source = "".join(inspect.getsource(functions[f"granchain.backends.kernels.{name}"].py_func) for name in CHAIN_KERNELS)
     dispatched = set(re.findall(r"(\w+_integrate)\(", source))
     assert dispatched == {"rk_integrate", "verlet_integrate"}, dispatched
     offenders = long_signatures(entry)
@@ -504,7 +506,7 @@ def test_a_new_model_field_reaches_the_step_loop_untouched(model_field_run, inte
     Python functions Numba compiles, looked up at call time, so the record can be swapped in as if
     ``records.py`` had been edited), ``records.Params`` gets a field ``probe`` (every module that
     imported the name sees the new record) and ``model_params`` fills it; nothing else changes. The
-    run goes through the real paths (``simulate`` -> backend -> ``dispatch.integrate_chain`` -> the
+    run goes through the real paths (``simulate`` -> backend -> ``dispatch.chain_kernel``'s kernel -> the
     method's step loop; ``run_ensemble`` -> backend -> ``batch.integrate_batch`` -> a Model per
     realisation -> the same) and a hook on ``peaks.initial_force_records``, which the step loops of
     DP5, RKN4 (``rkloop._rk_loop``) and Verlet call with the Model record they hold, must see the

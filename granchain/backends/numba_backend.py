@@ -2,8 +2,8 @@
 
 This is the only place that knows both sides: it turns an integrator's settings into a
 ``records.Method`` (kind and float64 params), a chain into a ``records.Model``, the run controls into
-a ``records.Run``, allocates the outputs and calls ``kernels.dispatch.integrate_chain`` (one chain)
-or ``kernels.batch.integrate_batch`` (a parallel batch of chains of one size).
+a ``records.Run``, allocates the outputs and calls the entry point ``kernels.dispatch.chain_kernel``
+picks (one chain) or ``kernels.batch.integrate_batch`` with it (a parallel batch of chains of one size).
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 
 from ..model.contacts import PowerLaw, Viscoelastic
 from . import Backend, aligned_outputs, batch_chain, effective_integrator
-from .kernels.batch import integrate_batch, thread_sums
-from .kernels.dispatch import integrate_chain
+from .kernels.batch import BATCH_KERNELS, thread_sums
+from .kernels.dispatch import chain_kernel
 from .kernels.forces import power_code
 from .kernels.records import (
     INFO_SIZE,
@@ -34,7 +34,7 @@ from .kernels.records import (
 
 
 def _rk_params(integ) -> np.ndarray:
-    """DP5's and RKN4's settings in the layout of ``dispatch.integrate_chain``."""
+    """DP5's and RKN4's settings in the layout of ``dispatch._steps``."""
     return np.array([integ.rtol, integ.atol, integ.first_step, integ.fixed_step or 0.0, integ.relaxed_lag or 0,
                      integ.relaxed_factor, integ.window_lag or 0])
 
@@ -100,7 +100,8 @@ class NumbaBackend(Backend):
         method = method_record(effective_integrator(integrator, chain))
         run = run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed)
         out = outputs(chain.observed.size, t_grid.size, chain.size, run.contacts.size)
-        status = integrate_chain(method, model_record(chain), run, State(x, v), out)
+        model = model_record(chain)
+        status = chain_kernel(method.kind, model.params)(method, model, run, State(x, v), out)
         return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f, out.grid_c
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
@@ -122,8 +123,9 @@ class NumbaBackend(Backend):
         # change: realisations are independent and the sums are integers (test_ensemble). The
         # per-thread sums are allocated here, not in the kernel (see thread_sums).
         with numba.parallel_chunksize(1):
-            integrate_batch(
-                Batch(masses, stiffness, initial_velocity, model_params(first), limits), method, run,
+            params = model_params(first)
+            BATCH_KERNELS[chain_kernel(method.kind, params)](
+                Batch(masses, stiffness, initial_velocity, params, limits), method, run,
                 Tally(contacts, float(scale), lags),
                 Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
                      out["status"], out["energy_error"], out["n_steps"], out["t_end"],

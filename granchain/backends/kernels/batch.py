@@ -1,7 +1,7 @@
 """Many realisations in parallel (Numba threads), one single-chain integration each.
 
-Realisation r of a batch is integrated by :func:`~granchain.backends.kernels.dispatch.integrate_chain`,
-the code ``granchain.simulate`` runs, on the same chain arrays: per-realisation results are
+Realisation r of a batch is integrated by the single-chain entry point of ``dispatch`` that
+``granchain.simulate`` runs for the same chain (an argument of the kernel), on the same chain arrays: per-realisation results are
 bitwise independent of how realisations are grouped, and equal to ``simulate``.
 
 The ensemble-averaged pulse <v_k(t)> is accumulated as running sums in fixed
@@ -19,9 +19,9 @@ from numba import njit, prange
 
 from ..._status import SUCCESS
 from .aligned import accumulate_aligned
-from .dispatch import integrate_chain
 from .forces import final_energy, impulse_energy
-from .jit import JIT, JIT_PARALLEL
+from .dispatch import dp5_chain, dp5_chain_general, rkn4_chain, rkn4_chain_general, verlet_chain
+from .jit import JIT, JIT_INLINE, JIT_PARALLEL
 from .records import (
     INFO_DISSIPATED,
     INFO_SIZE,
@@ -85,10 +85,14 @@ def thread_sums(n_threads, T, K, L):
                     np.zeros((n_threads, L, K), dtype=np.int64), np.zeros((n_threads, L, K), dtype=np.int64))
 
 
-@njit(**JIT_PARALLEL)
-def integrate_batch(batch, method, run, tally, rows, sums, partials):
+# Inlined into one parallel kernel per single-chain entry point (below), which it calls as a global:
+# a first-class function passed to a compiled function is a run-time object, whose compiled code Numba
+# cannot cache across processes; and each ensemble kernel is compiled only when a run uses it.
+@njit(**JIT_INLINE)
+def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     """Integrate realisations r = 0..R-1 (rows of ``batch``, ``records.Batch``: each struck at granule 1
-    with its ``initial_velocity``) with ``method``, recording what ``run`` asks (its
+    with its ``initial_velocity``) with ``method`` by the single-chain entry point ``kernel``
+    (``dispatch.chain_kernel``: one compiled specialisation of this kernel per entry point used), recording what ``run`` asks (its
     ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``; the run stops at the
     pulse's exit with ``run.stop_at_exit``, else, successfully, at the row's ``batch.t_max[r]`` (also its
     limit otherwise; ``run.t_max`` is not read): a precompressed chain,
@@ -138,7 +142,7 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
         info = np.zeros(INFO_SIZE)
         grid_c = np.zeros((T, sensed.shape[0]))
         row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed)
-        st = integrate_chain(method, Model(m, c, params), row_run, State(x, v),
+        st = kernel(method, Model(m, c, params), row_run, State(x, v),
                              Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
         gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
         status[r] = st
@@ -165,3 +169,38 @@ def integrate_batch(batch, method, run, tally, rows, sums, partials):
             for q in range(K):
                 sum_a[g, q] += al1[th, g, q]
                 sum_a2[g, q] += al2[th, g, q]
+
+
+@njit(**JIT_PARALLEL)
+def dp5_batch(batch, method, run, tally, rows, sums, partials):
+    """:func:`integrate_batch` with ``dispatch.dp5_chain``."""
+    integrate_batch(dp5_chain, batch, method, run, tally, rows, sums, partials)
+
+
+@njit(**JIT_PARALLEL)
+def dp5_batch_general(batch, method, run, tally, rows, sums, partials):
+    """:func:`integrate_batch` with ``dispatch.dp5_chain_general``."""
+    integrate_batch(dp5_chain_general, batch, method, run, tally, rows, sums, partials)
+
+
+@njit(**JIT_PARALLEL)
+def rkn4_batch(batch, method, run, tally, rows, sums, partials):
+    """:func:`integrate_batch` with ``dispatch.rkn4_chain``."""
+    integrate_batch(rkn4_chain, batch, method, run, tally, rows, sums, partials)
+
+
+@njit(**JIT_PARALLEL)
+def rkn4_batch_general(batch, method, run, tally, rows, sums, partials):
+    """:func:`integrate_batch` with ``dispatch.rkn4_chain_general``."""
+    integrate_batch(rkn4_chain_general, batch, method, run, tally, rows, sums, partials)
+
+
+@njit(**JIT_PARALLEL)
+def verlet_batch(batch, method, run, tally, rows, sums, partials):
+    """:func:`integrate_batch` with ``dispatch.verlet_chain``."""
+    integrate_batch(verlet_chain, batch, method, run, tally, rows, sums, partials)
+
+
+#: The ensemble kernel of each single-chain entry point.
+BATCH_KERNELS = {dp5_chain: dp5_batch, dp5_chain_general: dp5_batch_general, rkn4_chain: rkn4_batch,
+                 rkn4_chain_general: rkn4_batch_general, verlet_chain: verlet_batch}

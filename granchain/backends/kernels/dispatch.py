@@ -1,16 +1,20 @@
-"""The one compiled entry point for a single chain: a :data:`~.records.Method` picks the kernel.
+"""The compiled entry points for a single chain, one per method and model class, and the choice
+among them.
 
-``simulate`` and the ensemble kernel (``batch``) both call :func:`integrate_chain`, so a
-realisation of an ensemble is integrated by exactly the code (and to the bit) that ``simulate``
-uses. A new compiled method adds its kind (``records.KIND_*``), a branch here and its binding in
-``granchain.backends.numba_backend``. (A kernel factory closing over the single-chain function would
-be tidier, but Numba cannot cache closures across processes: every Dask worker and CLI start would
-recompile the parallel kernel.)
+``simulate`` and the ensemble kernel (``batch``) both call the entry point :func:`chain_kernel`
+picks, so a realisation of an ensemble is integrated by exactly the code (and to the bit) that
+``simulate`` uses. Each entry point is its own compiled function and Numba compiles a function on
+its first call: a run compiles the one kernel it uses (a first ``granchain pulse`` compiles DP5 for
+the paper's chain, not RKN4, Verlet or the real-contact loops). The ensemble kernel takes the entry
+point as an argument (a first-class function: one compiled and cached specialisation per entry
+point actually used). A new compiled method adds its kind (``records.KIND_*``), an entry point here
+and its binding in ``granchain.backends.numba_backend``.
 
-The common contract of every single-chain kernel: integrate ``model`` from ``state`` at t = 0,
-record the observed granules' peaks, their velocities on the grid, every contact's peak force, the
-wall force on the grid when the chain ends in a wall, fill ``info`` (``records.INFO_*``) and return a
-status code (``granchain._status``).
+The common contract of every single-chain kernel ``kernel(method, model, run, state, out)``:
+integrate ``model`` from ``state`` at t = 0 with ``method`` (``records.Method``), record the observed
+granules' peaks, their velocities on the grid, every contact's peak force, the wall force on the grid
+when the chain ends in a wall, fill ``info`` (``records.INFO_*``) and return a status code
+(``granchain._status``).
 """
 
 from __future__ import annotations
@@ -19,25 +23,64 @@ from numba import njit
 
 from .jit import JIT
 from .records import KIND_DP5, KIND_RKN4, KIND_VERLET, Steps
-from .rkloop import rk_integrate
+from .rkloop import dp5_loop, dp5_loop_general, rk_integrate, rkn4_loop, rkn4_loop_general
 from .verlet import verlet_integrate
-
-#: Returned for a kind that names no kernel (the Python layer never passes one).
-UNKNOWN_KIND = -2
 
 
 @njit(**JIT)
-def integrate_chain(method, model, run, state, out):
-    """Integrate one chain with ``method`` (``records.Method``; the other records: see ``records``).
+def _steps(params):
+    """DP5's and RKN4's params = [rtol, atol, first_step, fixed_step (0: adaptive), relaxed_lag,
+    relaxed_factor, window_lag (lags 0: off)] as ``records.Steps``."""
+    return Steps(params[0], params[1], params[2], params[3], int(params[4]), params[5], int(params[6]))
 
-    DP5 and RKN4 (one step loop, ``rkloop.rk_integrate``): params = [rtol, atol, first_step,
-    fixed_step (0: adaptive), relaxed_lag, relaxed_factor, window_lag (lags 0: off)]; Verlet:
-    params = [dt].
-    """
-    kind, params = method
-    if kind == KIND_DP5 or kind == KIND_RKN4:
-        steps = Steps(params[0], params[1], params[2], params[3], int(params[4]), params[5], int(params[6]))
-        return rk_integrate(kind, steps, model, run, state, out)
+
+@njit(**JIT)
+def dp5_chain(method, model, run, state, out):
+    """DP5 on the paper's chain (elastic, unloaded: ``forces.accelerations`` with ``general`` False)."""
+    return rk_integrate(dp5_loop, _steps(method.params), model, run, state, out)
+
+
+@njit(**JIT)
+def dp5_chain_general(method, model, run, state, out):
+    """DP5 with real contacts (a static load, viscoelastic damping)."""
+    return rk_integrate(dp5_loop_general, _steps(method.params), model, run, state, out)
+
+
+@njit(**JIT)
+def rkn4_chain(method, model, run, state, out):
+    """RKN4(3) on the paper's chain."""
+    return rk_integrate(rkn4_loop, _steps(method.params), model, run, state, out)
+
+
+@njit(**JIT)
+def rkn4_chain_general(method, model, run, state, out):
+    """RKN4(3) with a static load (RKN4 refuses damping: its forces may not read velocities)."""
+    return rk_integrate(rkn4_loop_general, _steps(method.params), model, run, state, out)
+
+
+@njit(**JIT)
+def verlet_chain(method, model, run, state, out):
+    """Velocity Verlet, params = [dt]."""
+    return verlet_integrate(method.params[0], model, run, state, out)
+
+
+def is_general(params) -> bool:
+    """Whether a model (``records.Params``) needs the real-contact kernels: damping or a static load."""
+    return params.gamma > 0.0 or params.static_force > 0.0
+
+
+def chain_kernel(kind: int, params):
+    """The entry point for a method ``kind`` (``records.KIND_*``) and a model's ``params``."""
     if kind == KIND_VERLET:
-        return verlet_integrate(params[0], model, run, state, out)
-    return UNKNOWN_KIND
+        return verlet_chain
+    general = is_general(params)
+    if kind == KIND_DP5:
+        return dp5_chain_general if general else dp5_chain
+    if kind == KIND_RKN4:
+        return rkn4_chain_general if general else rkn4_chain
+    raise ValueError(f"no compiled kernel of kind {kind!r}")
+
+
+def integrate_chain(method, model, run, state, out):
+    """Integrate one chain with the kernel of ``method`` and ``model`` (see the module's contract)."""
+    return chain_kernel(method.kind, model.params)(method, model, run, state, out)

@@ -62,7 +62,8 @@ E1, E3, E4, E5, E6, E7 = E[0], E[2], E[3], E[4], E[5], E[6]
 
 @njit(**JIT_INLINE)
 def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F, Pd, general):
-    """Stages 2..7 of one step over granules 0..hi-1, unrolled.
+    """Stages 2..7 of one step over granules 0..hi-1 (each stage's arithmetic written out, so that it
+    vectorises with its coefficients folded).
 
     Kx[s] are the stage velocities (dx/dt), Kv[s] the stage accelerations, Pd[s] the power the
     contacts dissipate at the stage (0 for elastic contacts; a viscoelastic force reads the stage
@@ -72,43 +73,35 @@ def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F, Pd, general):
     rather than a view of the stage velocities and writes no power: its compiled stages are those of
     DP5 before real contacts.
     """
-    for i in range(hi):
-        xs[i] = x[i] + h * (A21 * Kx[0, i])
-        Kx[1, i] = v[i] + h * (A21 * Kv[0, i])
-    power = accelerations(xs, Kx[1] if general else v, fm, hi, F, Kv[1], general)
-    if general:
-        Pd[1] = power
-    for i in range(hi):
-        xs[i] = x[i] + h * (A31 * Kx[0, i] + A32 * Kx[1, i])
-        Kx[2, i] = v[i] + h * (A31 * Kv[0, i] + A32 * Kv[1, i])
-    power = accelerations(xs, Kx[2] if general else v, fm, hi, F, Kv[2], general)
-    if general:
-        Pd[2] = power
-    for i in range(hi):
-        xs[i] = x[i] + h * (A41 * Kx[0, i] + A42 * Kx[1, i] + A43 * Kx[2, i])
-        Kx[3, i] = v[i] + h * (A41 * Kv[0, i] + A42 * Kv[1, i] + A43 * Kv[2, i])
-    power = accelerations(xs, Kx[3] if general else v, fm, hi, F, Kv[3], general)
-    if general:
-        Pd[3] = power
-    for i in range(hi):
-        xs[i] = x[i] + h * (A51 * Kx[0, i] + A52 * Kx[1, i] + A53 * Kx[2, i] + A54 * Kx[3, i])
-        Kx[4, i] = v[i] + h * (A51 * Kv[0, i] + A52 * Kv[1, i] + A53 * Kv[2, i] + A54 * Kv[3, i])
-    power = accelerations(xs, Kx[4] if general else v, fm, hi, F, Kv[4], general)
-    if general:
-        Pd[4] = power
-    for i in range(hi):
-        xs[i] = x[i] + h * (A61 * Kx[0, i] + A62 * Kx[1, i] + A63 * Kx[2, i] + A64 * Kx[3, i] + A65 * Kx[4, i])
-        Kx[5, i] = v[i] + h * (A61 * Kv[0, i] + A62 * Kv[1, i] + A63 * Kv[2, i] + A64 * Kv[3, i] + A65 * Kv[4, i])
-    power = accelerations(xs, Kx[5] if general else v, fm, hi, F, Kv[5], general)
-    if general:
-        Pd[5] = power
-    for i in range(hi):
-        xs[i] = x[i] + h * (B1 * Kx[0, i] + B3 * Kx[2, i] + B4 * Kx[3, i] + B5 * Kx[4, i] + B6 * Kx[5, i])
-        vs[i] = v[i] + h * (B1 * Kv[0, i] + B3 * Kv[2, i] + B4 * Kv[3, i] + B5 * Kv[4, i] + B6 * Kv[5, i])
-        Kx[6, i] = vs[i]
-    power = accelerations(xs, Kx[6] if general else v, fm, hi, F, Kv[6], general)
-    if general:
-        Pd[6] = power
+    for s in range(1, 7):  # one call of the force routine below, so that it is inlined once
+        if s == 1:
+            for i in range(hi):
+                xs[i] = x[i] + h * (A21 * Kx[0, i])
+                Kx[1, i] = v[i] + h * (A21 * Kv[0, i])
+        elif s == 2:
+            for i in range(hi):
+                xs[i] = x[i] + h * (A31 * Kx[0, i] + A32 * Kx[1, i])
+                Kx[2, i] = v[i] + h * (A31 * Kv[0, i] + A32 * Kv[1, i])
+        elif s == 3:
+            for i in range(hi):
+                xs[i] = x[i] + h * (A41 * Kx[0, i] + A42 * Kx[1, i] + A43 * Kx[2, i])
+                Kx[3, i] = v[i] + h * (A41 * Kv[0, i] + A42 * Kv[1, i] + A43 * Kv[2, i])
+        elif s == 4:
+            for i in range(hi):
+                xs[i] = x[i] + h * (A51 * Kx[0, i] + A52 * Kx[1, i] + A53 * Kx[2, i] + A54 * Kx[3, i])
+                Kx[4, i] = v[i] + h * (A51 * Kv[0, i] + A52 * Kv[1, i] + A53 * Kv[2, i] + A54 * Kv[3, i])
+        elif s == 5:
+            for i in range(hi):
+                xs[i] = x[i] + h * (A61 * Kx[0, i] + A62 * Kx[1, i] + A63 * Kx[2, i] + A64 * Kx[3, i] + A65 * Kx[4, i])
+                Kx[5, i] = v[i] + h * (A61 * Kv[0, i] + A62 * Kv[1, i] + A63 * Kv[2, i] + A64 * Kv[3, i] + A65 * Kv[4, i])
+        else:
+            for i in range(hi):
+                xs[i] = x[i] + h * (B1 * Kx[0, i] + B3 * Kx[2, i] + B4 * Kx[3, i] + B5 * Kx[4, i] + B6 * Kx[5, i])
+                vs[i] = v[i] + h * (B1 * Kv[0, i] + B3 * Kv[2, i] + B4 * Kv[3, i] + B5 * Kv[4, i] + B6 * Kv[5, i])
+                Kx[6, i] = vs[i]
+        power = accelerations(xs, Kx[s] if general else v, fm, hi, F, Kv[s], general)
+        if general:
+            Pd[s] = power
 
 
 @njit(**JIT_INLINE)

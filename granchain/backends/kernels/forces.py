@@ -158,6 +158,14 @@ def accelerations(x, v, fm, hi, F, a, general):
 
 
 @njit(**JIT)
+def accelerations_once(x, v, fm, hi, F, a, general):
+    """:func:`accelerations` as a call, not inlined: for the step loops' calls outside the stages
+    (the first stage, a window that grows or is cut), which are rare; the stages inline their one call.
+    Every copy inlined is compiled again (the first run of a kernel pays for it)."""
+    return accelerations(x, v, fm, hi, F, a, general)
+
+
+@njit(**JIT)
 def impulse_energy(m0, v0):
     """The energy of the initial state, all kinetic: granule 1 (or a striker) struck with v0, the rest
     at rest in the static state (``granchain.model.contacts.Impulse``, ``Striker``)."""

@@ -36,7 +36,7 @@ Model = namedtuple("Model", ["masses", "stiffness", "params"])
 Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "params", "t_max"])
 
 #: The integration method: ``kind`` (``KIND_*`` below) and its settings ``params`` (float64,
-#: laid out by the kind: see ``dispatch.integrate_chain``).
+#: laid out by the kind: see ``dispatch``).
 Method = namedtuple("Method", ["kind", "params"])
 
 #: The step control of the Runge-Kutta loop (``rkloop``), unpacked from a :data:`Method`'s params.

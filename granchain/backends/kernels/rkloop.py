@@ -28,7 +28,7 @@ from .dense import (
     hermite_max_estimate,
     weights,
 )
-from .forces import accelerations, add_potential, contact_force, force_rate, static_state
+from .forces import accelerations_once, add_potential, contact_force, force_rate, static_state
 from .jit import JIT, JIT_INLINE
 from .memory import borrowed, keep_alive
 from .peaks import (
@@ -108,13 +108,16 @@ def error_norm(method, x, v, xs, vs, Kx, Kv, h, hi, relaxed, steps, ratio):
     return ratio[0]
 
 
-@njit(**JIT)
-def rk_integrate(method, steps, model, run, state, out):
+# Inlined into each entry point of ``dispatch`` (it is only the set-up around the loop): passed to a
+# compiled function, a first-class function is a run-time object that Numba cannot cache.
+@njit(**JIT_INLINE)
+def rk_integrate(loop, steps, model, run, state, out):
     """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
-    final state) with ``method`` (``KIND_DP5``, or ``KIND_RKN4``: the Runge-Kutta-Nystrom pair of
-    ``rkn4``, same loop, step control and records) and its step control ``steps``
-    (``records.Steps``), recording into ``out`` (``records.Outputs``) what ``run`` asks
-    (``records.Run``).
+    final state) with the step ``loop`` (:func:`dp5_loop`, or :func:`rkn4_loop`: the
+    Runge-Kutta-Nystrom pair of ``rkn4``, same loop, step control and records; their ``_general``
+    variants for real contacts; a first-class function, so each is compiled only when used) and its
+    step control ``steps`` (``records.Steps``), recording into ``out`` (``records.Outputs``) what
+    ``run`` asks (``records.Run``).
 
     For each observed granule q (0-based index run.observed[q]) the kernel writes the maximum
     velocity ``peak_v[q]`` and its time ``peak_t[q]`` (see ``peaks.is_new_peak`` for ties), and the
@@ -183,16 +186,7 @@ def rk_integrate(method, steps, model, run, state, out):
     scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
                borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen), borrowed(op), borrowed(f0p),
                borrowed(Pd))
-    general = model.params.gamma > 0.0 or model.params.static_force > 0.0  # real contacts (forces.accelerations)
-    if method == KIND_RKN4:
-        if general:
-            status = _rkn4_loop_general(steps, bmodel, brun, bstate, bout, scratch)
-        else:
-            status = _rkn4_loop(steps, bmodel, brun, bstate, bout, scratch)
-    elif general:
-        status = _dp5_loop_general(steps, bmodel, brun, bstate, bout, scratch)
-    else:
-        status = _dp5_loop(steps, bmodel, brun, bstate, bout, scratch)
+    status = loop(steps, bmodel, brun, bstate, bout, scratch)
     keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd)
     x[:] = xp[:M]
     v[:] = vp[:M]
@@ -200,25 +194,25 @@ def rk_integrate(method, steps, model, run, state, out):
 
 
 @njit(**JIT)
-def _dp5_loop(steps, model, run, state, out, scratch):
+def dp5_loop(steps, model, run, state, out, scratch):
     """:func:`_rk_loop` with DP5, for the paper's chain."""
     return _rk_loop(KIND_DP5, False, steps, model, run, state, out, scratch)
 
 
 @njit(**JIT)
-def _dp5_loop_general(steps, model, run, state, out, scratch):
+def dp5_loop_general(steps, model, run, state, out, scratch):
     """:func:`_rk_loop` with DP5, for real contacts."""
     return _rk_loop(KIND_DP5, True, steps, model, run, state, out, scratch)
 
 
 @njit(**JIT)
-def _rkn4_loop(steps, model, run, state, out, scratch):
+def rkn4_loop(steps, model, run, state, out, scratch):
     """:func:`_rk_loop` with RKN4(3), for the paper's chain."""
     return _rk_loop(KIND_RKN4, False, steps, model, run, state, out, scratch)
 
 
 @njit(**JIT)
-def _rkn4_loop_general(steps, model, run, state, out, scratch):
+def rkn4_loop_general(steps, model, run, state, out, scratch):
     """:func:`_rk_loop` with RKN4(3), for real contacts (a static load: RKN4 refuses damping)."""
     return _rk_loop(KIND_RKN4, True, steps, model, run, state, out, scratch)
 
@@ -226,7 +220,8 @@ def _rkn4_loop_general(steps, model, run, state, out, scratch):
 # Inlined into the four loops above, each with its method and ``general`` constants, so that the
 # compiler drops the other method's branches (compiled once with the method a run-time value, the loop
 # cost DP5 ~6 % more per realisation, same-process timing at N = 26) and, for the paper's chain, the
-# code of the real contacts (see forces.accelerations).
+# code of the real contacts (see forces.accelerations). Each loop is compiled only when a run uses it
+# (``dispatch``).
 @njit(**JIT_INLINE)
 def _rk_loop(method, general, steps, model, run, state, out, scratch):
     """The step loop of :func:`rk_integrate`, on borrowed arrays (``memory.borrowed``: no reference
@@ -260,11 +255,17 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
     ahead = margin(p)
     lo = 0
     hi = initial_window(x[:M], v[:M], ahead)
-    Pd[0] = accelerations(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0], general)
+    Pd[0] = accelerations_once(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0], general)
     for i in range(hi):
         Kx[0, i] = v[i]
     n_eval = 1
     front = -1  # observed granule (index into obs) of the front
+    # Observed granules in the window: obs[q_lo..q_hi-1] (obs increases; both ends only move forward),
+    # so that a step's peak search costs O(window), not O(observed granules) (long chains).
+    q_lo = 0
+    q_hi = 0
+    while q_hi < n_obs and obs[q_hi] < hi:
+        q_hi += 1
     relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
     frozen_potential = 0.0
     dissipated = 0.0
@@ -342,10 +343,8 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
             n_candidates = 0
             for i in range(hp):
                 n_candidates += falls(Kv[0, i], Kv[6, i])
-            for q in range(n_obs if n_candidates > 0 else 0):
+            for q in range(q_lo, q_hi if n_candidates > 0 else q_lo):
                 k = obs[q] - lo
-                if k < 0 or k >= hw:
-                    continue
                 a0 = Kv[0, k]
                 a1 = Kv[6, k]
                 if falls(a0, a1):
@@ -427,14 +426,16 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
                 new_hi = lo + advance_window(XM, VM, hw, ahead)
                 if new_hi > hi:
                     hi = new_hi
-                    Pd[0] = accelerations(X, V, FM, hi - lo, F, Kv[0], general)
+                    while q_hi < n_obs and obs[q_hi] < hi:
+                        q_hi += 1
+                    Pd[0] = accelerations_once(X, V, FM, hi - lo, F, Kv[0], general)
                     for i in range(hi - lo):
                         Kx[0, i] = V[i]
                     n_eval += 1
             cut = False
             if goal and front >= 0:
                 if window_lag > 0 and front >= window_lag:
-                    new_lo = open_contact_behind(X, lo, obs[front - window_lag])
+                    new_lo = open_contact_behind(X, C, p, lo, obs[front - window_lag])
                     if new_lo > lo:
                         # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
                         # contacts among them (the contact at the new edge is open), their exit time.
@@ -442,14 +443,23 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
                         frozen_potential = add_potential(frozen_potential, X, C, p, 0, d - 1)
                         for i in range(d):
                             t_frozen[lo + i] = t
-                        for s in range(7):  # the whole padded width: zeros follow the window
-                            for i in range(Mp - new_lo):
+                        # Shift the stage arrays by d over the padded window only: past it they are
+                        # zeros (the stages write granules 0..padded_width(hi - lo) - 1 alone), so the
+                        # cut costs O(window), not O(chain) (which made long chains quadratic).
+                        wp = padded_width(hi - lo)
+                        for s in range(7):
+                            for i in range(wp - d):
                                 Kx[s, i] = Kx[s, i + d]
                                 Kv[s, i] = Kv[s, i + d]
+                            for i in range(wp - d, wp):
+                                Kx[s, i] = 0.0
+                                Kv[s, i] = 0.0
                         lo = new_lo
+                        while q_lo < n_obs and obs[q_lo] < lo:
+                            q_lo += 1
                         cut = True
                         if damped:  # the power of the contacts still integrated (the next step's first stage)
-                            Pd[0] = accelerations(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:]),
+                            Pd[0] = accelerations_once(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:]),
                                                   hi - lo, F, Kv[0], general)
                             n_eval += 1
                 if relax_lag > 0 and front >= relax_lag:

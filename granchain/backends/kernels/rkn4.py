@@ -54,15 +54,17 @@ def stages(x, v, Kv, xs, vs, h, hi, fm, F, general):
     """Stages 1..3 of one step over granules 0..hi-1 (``Kv[0]`` holds f(x)); on return ``xs``, ``vs``
     hold the new state and ``Kv[3]`` the force per mass there (three force evaluations)."""
     h2 = h * h
-    for i in range(hi):
-        xs[i] = x[i] + h * (C1 * v[i]) + h2 * (A10 * Kv[0, i])
-    accelerations(xs, v, fm, hi, F, Kv[1], general)  # forces of positions only: v unread
-    for i in range(hi):
-        xs[i] = x[i] + h * (C2 * v[i]) + h2 * (A20 * Kv[0, i] + A21 * Kv[1, i])
-    accelerations(xs, v, fm, hi, F, Kv[2], general)  # forces of positions only: v unread
-    for i in range(hi):
-        xs[i] = x[i] + h * v[i] + h2 * (B0 * Kv[0, i] + B1 * Kv[1, i] + B2 * Kv[2, i])
-    accelerations(xs, v, fm, hi, F, Kv[3], general)  # forces of positions only: v unread
+    for s in range(1, 4):  # one call of the force routine below, so that it is inlined once
+        if s == 1:
+            for i in range(hi):
+                xs[i] = x[i] + h * (C1 * v[i]) + h2 * (A10 * Kv[0, i])
+        elif s == 2:
+            for i in range(hi):
+                xs[i] = x[i] + h * (C2 * v[i]) + h2 * (A20 * Kv[0, i] + A21 * Kv[1, i])
+        else:
+            for i in range(hi):
+                xs[i] = x[i] + h * v[i] + h2 * (B0 * Kv[0, i] + B1 * Kv[1, i] + B2 * Kv[2, i])
+        accelerations(xs, v, fm, hi, F, Kv[s], general)  # forces of positions only: v unread
     for i in range(hi):
         vs[i] = v[i] + h * (P0 * Kv[0, i] + P1 * Kv[1, i] + P2 * Kv[2, i] + P3 * Kv[3, i])
 

@@ -1,0 +1,79 @@
+"""A run compiles only the kernels it uses, and the trailing window's bookkeeping stays within the
+window (so a long chain costs in proportion to its length, not its square).
+
+Speed itself is measured in ``benchmarks/bench_first_run.py`` (compilation per kernel, the first
+``granchain pulse`` against granchain 0.4.0, cost against chain length), never here: these machines
+are shared and noisy. What is tested here is what makes those numbers possible, and could break
+silently: which compiled functions a run touches, and that a long windowed run is right.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+
+import granchain as gc
+
+PROBE = textwrap.dedent(
+    """
+    import json, sys
+    import granchain as gc
+    from granchain.backends.kernels import batch, dispatch
+    job = sys.argv[1]
+    small = gc.decorated([0.05, 0.3, 0.012])
+    if job == "pulse":
+        gc.simulate(small)
+    elif job == "ensemble":
+        gc.run_ensemble(6, realizations=2, progress=False, chains="decorated")
+    elif job == "damped":
+        gc.simulate(small.with_dissipation(0.05))
+    names = ["dp5_chain", "dp5_chain_general", "rkn4_chain", "rkn4_chain_general", "verlet_chain"]
+    used = {name: len(getattr(dispatch, name).signatures) for name in names}
+    used.update({name: len(getattr(batch, name).signatures) for name in
+                 ["dp5_batch", "dp5_batch_general", "rkn4_batch", "rkn4_batch_general", "verlet_batch"]})
+    print(json.dumps(used))
+    """
+)
+
+
+def _compiled(job: str) -> set:
+    """The kernels holding compiled code (from the cache or compiled) after ``job`` in a fresh interpreter."""
+    out = subprocess.run([sys.executable, "-c", PROBE, job], capture_output=True, text=True, check=True)
+    return {name for name, n in json.loads(out.stdout.splitlines()[-1]).items() if n > 0}
+
+
+def test_a_pulse_compiles_dp5_for_the_papers_chain_alone():
+    """A first ``simulate`` of a decorated chain (DP5, elastic, unloaded) loads or compiles DP5's kernel
+    for the paper's chain and nothing else: not RKN4, Verlet, the real-contact loops or any ensemble
+    kernel (each of which cost a newcomer's first run its compilation). A damped chain takes the
+    real-contact kernel, an ensemble of decorated chains the RKN4 ensemble kernel (its default), each
+    alone: the check can fail both ways."""
+    assert _compiled("pulse") == {"dp5_chain"}
+    assert _compiled("damped") == {"dp5_chain_general"}
+    assert _compiled("ensemble") == {"rkn4_batch"}
+
+
+def test_a_long_windowed_chain_carries_the_solitary_wave():
+    """20,000 granules with the trailing window (its cuts shift the stage arrays over the window only,
+    the peak search visits only the observed granules inside it, and behind the solitary wave, where
+    the contacts stay closed at rounding-size compressions, it cuts across a contact whose force is
+    below ``window.CUT_FORCE``): the solitary wave that forms from the impulse travels unchanged to
+    the far end. Every peak velocity past granule 100 equals, within 1e-8, the solitary wave's peak at
+    granule 150 of a 200-granule chain integrated without any window (DP5 at rtol 1e-10: an independent
+    run, no cut, no relaxed zone), and the wave's arrival times are equally spaced (to 1e-8). At
+    rtol 1e-8 the run measured 2.6e-10 and 1.1e-10. A stage array left unshifted, a peak missed at a
+    window edge or a cut that lost a force that mattered would break the wave (the negative control:
+    granule 2's peak is not the solitary wave's)."""
+    n = 20_000
+    res = gc.simulate(gc.monodisperse(n), integrator=gc.RKN4.windowed(1e-8, 1e-11))
+    assert res.status == 0, res.message
+    ref = gc.simulate(gc.monodisperse(200), integrator=gc.DP5(1e-10, 1e-13)).peak_velocity[150]
+    v = res.peak_velocity[100:-20]
+    assert np.abs(v - ref).max() < 1e-8, np.abs(v - ref).max()
+    assert abs(res.peak_velocity[1] - ref) > 1e-3  # the wave forms over the first granules
+    dt = np.diff(res.peak_time[100:-20])
+    assert np.ptp(dt) < 1e-8 * dt.mean(), (dt.min(), dt.max())
