@@ -19,51 +19,15 @@ the history of every evaluation, resumable on disk.
 """
 
 from .evaluate import BatchEvaluator, Evaluation, default_integrator
-from .objectives import (
-                         OBJECTIVES,
-                         ArrivalTime,
-                         ImpulseDuration,
-                         Objective,
-                         SensorForce,
-                         TransmittedEnergy,
-                         TransmittedMomentum,
-                         WallForce,
-                         get_objective,
-)
+from .function_space import FunctionSpace
+from .objectives import (OBJECTIVES, ArrivalTime, ImpulseDuration, Objective, SensorForce, TransmittedEnergy,
+                         TransmittedMomentum, WallForce, get_objective)
 from .optimize import LOCAL_METHODS, minimum_budget, optimize
 from .result import DesignResult
-from .space import (
-                         BinarySpace,
-                         Constraints,
-                         DecoratedSpace,
-                         DesignSpace,
-                         FunctionSpace,
-                         RandomDecoratedSpace,
-                         TaperedSpace,
-)
+from .robust import RandomDecoratedSpace
+from .space import BinarySpace, Constraints, DecoratedSpace, DesignSpace, TaperedSpace
 
-__all__ = [
-                         "LOCAL_METHODS",
-                         "OBJECTIVES",
-                         "ArrivalTime",
-                         "BatchEvaluator",
-                         "BinarySpace",
-                         "Constraints",
-                         "DecoratedSpace",
-                         "DesignResult",
-                         "DesignSpace",
-                         "Evaluation",
-                         "FunctionSpace",
-                         "ImpulseDuration",
-                         "Objective",
-                         "RandomDecoratedSpace",
-                         "SensorForce",
-                         "TaperedSpace",
-                         "TransmittedEnergy",
-                         "TransmittedMomentum",
-                         "WallForce",
-                         "default_integrator",
-                         "get_objective",
-                         "minimum_budget",
-                         "optimize",
-]
+__all__ = ["ArrivalTime", "BatchEvaluator", "BinarySpace", "Constraints", "DecoratedSpace", "DesignResult", "DesignSpace",
+           "Evaluation", "FunctionSpace", "ImpulseDuration", "LOCAL_METHODS", "OBJECTIVES", "Objective",
+           "RandomDecoratedSpace", "SensorForce", "TaperedSpace", "TransmittedEnergy", "TransmittedMomentum", "WallForce",
+           "default_integrator", "get_objective", "minimum_budget", "optimize"]

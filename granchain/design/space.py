@@ -8,8 +8,9 @@ functions as the single-chain builders, so that a row is the :class:`granchain.C
 Units are the paper's rescaled ones (Sec. II): radii in units of the struck granule's radius (granule
 1 has radius 1 in every ready space), masses R^3 (one material), granule 1 starts with velocity 1.
 The ready spaces: :class:`TaperedSpace`, :class:`DecoratedSpace`, :class:`BinarySpace`,
-:class:`RandomDecoratedSpace` (robust design over the realisations of a random decoration) and
-:class:`FunctionSpace` (a user's function).
+:class:`granchain.design.RandomDecoratedSpace` (robust design over the realisations of a random
+decoration, in ``robust``) and :class:`granchain.design.FunctionSpace` (a user's function, in
+``function_space``).
 """
 
 from __future__ import annotations
@@ -35,8 +36,6 @@ __all__ = [
     "Constraints",
     "DecoratedSpace",
     "DesignSpace",
-    "FunctionSpace",
-    "RandomDecoratedSpace",
     "TaperedSpace",
 ]
 
@@ -396,7 +395,3 @@ class BinarySpace(DesignSpace):
     def label(self) -> str:
         mats = "" if self.materials is None else f" ({self.materials[0].name}/{self.materials[1].name})"
         return f"binary, {self.size} granules of radius {self.species_radii[0]:g} or {self.species_radii[1]:g}{mats}"
-
-
-from .function_space import FunctionSpace
-from .robust import RandomDecoratedSpace
