@@ -51,17 +51,17 @@ class History:
 
     # -- disk ---------------------------------------------------------------------------
     def _load(self) -> None:
-        import xarray as xr
+        import zarr  # the history is no ensemble store (granchain.open_store reads those): its arrays directly
 
-        ds = xr.open_zarr(self.path, consolidated=False)
-        old = json.loads(ds.attrs.get(_RECORD, "{}"))
+        group = zarr.open_group(self.path, mode="r")
+        old = json.loads(group.attrs.get(_RECORD, "{}"))
         if old != json.loads(json.dumps(self.record)):
             diff = sorted(k for k in set(old) | set(self.record) if old.get(k) != json.loads(json.dumps(self.record)).get(k))
             raise ValueError(f"{self.path} holds a design run with other arguments (they differ in {diff}); start it with the "
                              "same arguments to continue it, or choose another directory")
-        done = int(ds.attrs.get("evaluations_done", 0))
-        x = np.asarray(ds["params"].values[:done], dtype=float)
-        for row, v, s, f in zip(x, ds["value"].values[:done], ds["stderr"].values[:done], ds["failed"].values[:done]):
+        done = int(group.attrs.get("evaluations_done", 0))
+        x = np.asarray(group["params"][:done], dtype=float)
+        for row, v, s, f in zip(x, group["value"][:done], group["stderr"][:done], group["failed"][:done]):
             self.cache[row.tobytes()] = (float(v), float(s), int(f))
         self.written = done
 
