@@ -1,0 +1,176 @@
+"""The batched evaluator: a generation of designs as one call of the compiled ensemble kernel.
+
+A generation of P designs (P x R chains for a random space: R realisations each, the same
+realisations for every design) is built as one :class:`granchain.families.ChainBatch` by the space
+and integrated by ``Integrator.integrate_batch`` (the kernel :func:`granchain.run_ensemble` uses,
+parallel over rows in Numba threads); the objective reads the per-row outputs. No Python loop of
+:func:`granchain.simulate` per design, except for the objectives that need one row's wall-force
+history (``Objective.route == "history"``, see :mod:`granchain.design.objectives`).
+
+A Dask ``client`` splits a generation into one batch per worker (``client.map``); the values do
+not depend on the split (rows are independent).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..backends import batch_chain
+from ..ensembles.run import ensemble_integrator
+from ..solve.integrators import DP5, RunControls, get_integrator
+from ..solve.simulation import simulate, time_limit
+from .objectives import Objective, get_objective
+
+__all__ = ["BatchEvaluator", "Evaluation", "default_integrator", "evaluate_chains", "run_rows"]
+
+#: Bootstrap resamples for the standard error of a quantile over the realisations (seeded: the
+#: error bar of a design does not change between runs).
+BOOTSTRAP = 400
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Values of P designs: ``value`` (P,) (NaN where a design failed or is infeasible), ``stderr``
+    (P,) (NaN for a deterministic space), ``failed`` (P,) the number of failed integrations (rows)."""
+
+    value: np.ndarray
+    stderr: np.ndarray
+    failed: np.ndarray
+
+
+def run_rows(batch, integrator, contacts) -> dict:
+    """Integrate every row of ``batch`` with the compiled batch kernel; the per-row outputs by name."""
+    # Writable C-contiguous copies: a chain's frozen (read-only) arrays would make Numba compile the
+    # kernel once more for read-only arguments (a minute), for no gain.
+    masses = np.array(batch.masses, dtype=float, order="C")
+    stiffness = np.array(batch.stiffness, dtype=float, order="C")
+    v0 = np.array(batch.initial_velocity, dtype=float, order="C")
+    observed = np.array(batch.observed, dtype=np.int64, order="C")
+    contacts = np.array(contacts, dtype=np.int64, order="C")
+    R, K, C = masses.shape[0], observed.size, contacts.size
+    t_grid = np.zeros(1)  # no averaged pulse: one sample, the objectives read peaks
+    out = {"peak_velocity": np.full((R, K), np.nan), "peak_time": np.full((R, K), np.nan),
+           "peak_force": np.full((R, C), np.nan), "peak_force_time": np.full((R, C), np.nan),
+           "peak_wall": np.full((R, 2), np.nan), "status": np.full(R, -1, dtype=np.int8),
+           "energy_error": np.full(R, np.nan), "n_steps": np.full(R, -1, dtype=np.int64), "t_end": np.full(R, np.nan),
+           "sum_v": np.zeros((1, K), dtype=np.int64), "sum_v2": np.zeros((1, K), dtype=np.int64),
+           "sum_wall": np.zeros(1, dtype=np.int64), "n_valid": np.zeros(1, dtype=np.int64), "lags": None}
+    t_max = time_limit(masses.shape[1], float(v0.min()), batch.n)
+    integrator.integrate_batch(masses, stiffness, batch.n, v0, observed, contacts, t_grid=t_grid, t_max=t_max,
+                               controls=RunControls(), scale=1.0, out=out)
+    return out
+
+
+def _history_value(chain, objective: Objective, integrator) -> float:
+    """One chain's value from :func:`granchain.simulate` with its wall force on a fine grid: a first run
+    finds when the pulse has come back, the second samples the force up to then (every 0.01 time
+    units, at least 2000 samples)."""
+    first = simulate(chain, integrator)
+    if not first.ok:
+        return float("nan")
+    t_end = float(first.t_end)
+    res = simulate(chain, integrator, t_grid=np.linspace(0.0, t_end, max(2001, int(t_end / 0.01) + 1)))
+    return objective.from_result(res) if res.ok else float("nan")
+
+
+def evaluate_chains(batch, objective: Objective, integrator) -> tuple:
+    """(values (R,), ok (R,)) of every row of ``batch`` for ``objective``: through the batch kernel, or
+    row by row with simulate for a history objective."""
+    wall = bool(np.isinf(batch.masses[0, -1]))
+    objective.check(wall)
+    if objective.route(wall) == "rows":
+        rows = run_rows(batch, integrator, objective.contacts(batch.masses.shape[1] - int(wall)))
+        ok = rows["status"] == 0
+        values = np.where(ok, objective.from_rows(rows, batch), np.nan)
+        return values, ok
+    values = np.array([_history_value(batch_chain(batch.masses[r], batch.stiffness[r], batch.n, batch.initial_velocity[r],
+                                                  batch.observed), objective, integrator)
+                       for r in range(batch.masses.shape[0])])
+    return values, np.isfinite(values)
+
+
+def _statistic(values: np.ndarray, statistic) -> tuple:
+    """(value, stderr) of one design's realisations: the mean and its standard error std/sqrt(R), or the
+    quantile ``statistic`` and a seeded bootstrap standard error."""
+    v = values[np.isfinite(values)]
+    if v.size < 2:
+        return float("nan"), float("nan")
+    if statistic == "mean":
+        return float(v.mean()), float(v.std(ddof=1) / np.sqrt(v.size))
+    q = float(statistic)
+    rng = np.random.default_rng(12345)
+    boot = np.quantile(v[rng.integers(0, v.size, (BOOTSTRAP, v.size))], q, axis=1)
+    return float(np.quantile(v, q)), float(boot.std(ddof=1))
+
+
+def default_integrator(space):
+    """Decorated chains: the ensembles' (``RKN4`` at :data:`granchain.ENSEMBLE_RTOL`; light granules set
+    its step, :func:`granchain.ensemble_integrator`); every other chain: ``DP5()``, :func:`granchain.simulate`'s
+    default, so that a reported value is exactly what ``simulate(space.chain(best))`` gives."""
+    return ensemble_integrator("decorated") if space.chain_kind == "decorated" else DP5()
+
+
+def _check_statistic(statistic):
+    if statistic == "mean":
+        return statistic
+    try:
+        q = float(statistic)
+    except (TypeError, ValueError):
+        q = -1.0
+    if not 0.0 < q < 1.0:
+        raise ValueError(f"statistic must be 'mean' or a quantile in (0, 1) (e.g. 0.9: nine realisations in ten do better), "
+                         f"got {statistic!r}")
+    return q
+
+
+class BatchEvaluator:
+    """``evaluator(X)`` -> :class:`Evaluation` of the designs X (P, D) of ``space`` for ``objective``.
+
+    ``integrator``: default the ensembles' for the space's chain kind
+    (:func:`granchain.ensemble_integrator`); ``statistic``: "mean" or a quantile, for random spaces;
+    ``client``: a ``dask.distributed.Client`` (one batch per worker)."""
+
+    def __init__(self, space, objective, *, integrator=None, statistic="mean", client=None):
+        self.space = space
+        self.objective = get_objective(objective)
+        self.objective.check(space.wall)
+        self.integrator = default_integrator(space) if integrator is None else get_integrator(integrator)
+        self.statistic = _check_statistic(statistic)
+        self.client = client
+
+    def describe(self) -> dict:
+        return {"integrator": self.integrator.describe(), "statistic": self.statistic}
+
+    def __call__(self, X) -> Evaluation:
+        X = self.space.as_array(X)
+        if self.client is None or X.shape[0] < 2:
+            return _evaluate(self.space, self.objective, self.integrator, self.statistic, X)
+        workers = max(1, len(self.client.scheduler_info().get("workers", {})))
+        parts = [p for p in np.array_split(X, min(workers, X.shape[0])) if p.size]
+        futures = self.client.map(_evaluate, [self.space] * len(parts), [self.objective] * len(parts),
+                                  [self.integrator] * len(parts), [self.statistic] * len(parts), parts, pure=False)
+        results = self.client.gather(futures)
+        return Evaluation(*(np.concatenate([getattr(r, f) for r in results]) for f in ("value", "stderr", "failed")))
+
+
+def _evaluate(space, objective, integrator, statistic, X) -> Evaluation:
+    """The values of designs X (a top-level function, so that Dask can ship it)."""
+    P = X.shape[0]
+    feasible = space.violation(X) <= 0.0
+    value, stderr, failed = np.full(P, np.nan), np.full(P, np.nan), np.zeros(P, dtype=np.int64)
+    if not feasible.any():
+        return Evaluation(value, stderr, failed)
+    Xf = X[feasible]
+    values, ok = evaluate_chains(space.batch(Xf), objective, integrator)
+    R = space.realizations
+    values, ok = values.reshape(Xf.shape[0], R), ok.reshape(Xf.shape[0], R)
+    idx = np.flatnonzero(feasible)
+    failed[idx] = (~ok).sum(axis=1)
+    if R == 1:
+        value[idx] = values[:, 0]
+    else:
+        for i, row in zip(idx, values):
+            value[i], stderr[i] = _statistic(row, statistic)
+    return Evaluation(value, stderr, failed)
