@@ -5,10 +5,12 @@ among them.
 picks, so a realisation of an ensemble is integrated by exactly the code (and to the bit) that
 ``simulate`` uses. Each entry point is its own compiled function and Numba compiles a function on
 its first call: a run compiles the one kernel it uses (a first ``granchain pulse`` compiles DP5 for
-the paper's chain, not RKN4, Verlet or the real-contact loops). The ensemble kernel takes the entry
-point as an argument (a first-class function: one compiled and cached specialisation per entry
-point actually used). A new compiled method adds its kind (``records.KIND_*``), an entry point here
-and its binding in ``granchain.backends.numba_backend``.
+the paper's chain, not RKN4, Verlet or the real-contact loops). Each entry point has its own
+ensemble kernel (``batch.BATCH_KERNELS``), compiled only when an ensemble uses it. (The entry point
+cannot be an argument of a compiled function: a first-class function is then a run-time object,
+and Numba does not cache such code across processes.) A new compiled method adds its kind
+(``records.KIND_*``), an entry point here, its ensemble kernel in ``batch`` and its binding in
+``granchain.backends.numba_backend``.
 
 The common contract of every single-chain kernel ``kernel(method, model, run, state, out)``:
 integrate ``model`` from ``state`` at t = 0 with ``method`` (``records.Method``), record the observed
