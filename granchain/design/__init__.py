@@ -9,7 +9,7 @@ of a *design space* (:class:`TaperedSpace`, :class:`DecoratedSpace`, :class:`Bin
 maximises an *objective* (:class:`WallForce`, :class:`TransmittedEnergy`, :class:`TransmittedMomentum`,
 :class:`ImpulseDuration`, :class:`ArrivalTime`, :class:`SensorForce`), found by SciPy's optimisers
 (:func:`optimize`) over generations evaluated as batches of the compiled ensemble kernel
-(:class:`BatchEvaluator`). The result (:class:`DesignResult`) holds the best chain, its value (with
+(:class:`~granchain.design.evaluate.BatchEvaluator`). The result (:class:`DesignResult`) holds the best chain, its value (with
 its error bar over common random realisations for a random space), the monodisperse reference and
 the history of every evaluation, resumable on disk.
 

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import hashlib
-import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..families import ChainBatch
+from ..families import ChainBatch, function_fingerprint
 from ..model.chain import HERTZ, Chain, from_radii
 from .space import Constraints, DesignSpace, _bounds, _init
 
@@ -99,15 +97,9 @@ class FunctionSpace(DesignSpace):
         return from_radii(np.ones(p.size - int(p.wall)), n=p.n, kind="monodisperse", wall=p.wall)
 
     def describe(self) -> dict:
-        fn = self.build_fn
-        try:
-            source = inspect.getsource(fn)
-        except (OSError, TypeError):
-            source = repr(fn)
         rec = self._common()
         rec["wall"] = self._probe.wall
-        return {**rec, "build": f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', repr(fn))}",
-                "source_sha256": hashlib.sha256(source.encode()).hexdigest(), "size": self._probe.size - int(self._probe.wall)}
+        return {**rec, **function_fingerprint(self.build_fn), "size": self._probe.size - int(self._probe.wall)}
 
     def label(self) -> str:
         return f"{self.kind} (a user's function), {self._probe.size - int(self._probe.wall)} granules"

@@ -89,7 +89,7 @@ class RandomDecoratedSpace(DesignSpace):
         return np.maximum(width, per)
 
     def chain(self, params, realization: int = 0) -> Chain:
-        """Realisation ``realization`` of one design (the row of :meth:`batch`)."""
+        """Realisation ``realization`` of one design (the row of :meth:`DesignSpace.batch`)."""
         X = self.as_array(params)[:1]
         b = self.batch(X)
         radii = self.radii(X)[realization]

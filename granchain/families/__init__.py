@@ -731,6 +731,17 @@ class BinaryRandom(_RadiiFamily):
 
 
 # ---------------------------------------------------------------------------- a user's family
+def function_fingerprint(fn) -> dict:
+    """What identifies a user's function in a record: its qualified name and the SHA-256 of its source
+    (of its ``repr`` when the source cannot be read), so that a resumed run refuses an edited function."""
+    try:
+        source = inspect.getsource(fn)
+    except (OSError, TypeError):
+        source = repr(fn)
+    return {"build": f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', repr(fn))}",
+            "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
+
+
 @dataclass(frozen=True, init=False)
 class CustomFamily(ChainFamily):
     """Any family a user can write as a function ``build(rng) -> radii`` (a 1-d array: a chain of
@@ -878,13 +889,7 @@ class CustomFamily(ChainFamily):
         return self._make_chain(realization_rng(seed, realization), "build(rng)")
 
     def describe(self) -> dict:
-        fn = self.build_fn
-        try:
-            source = inspect.getsource(fn)
-        except (OSError, TypeError):
-            source = repr(fn)
-        return {"family": self.kind, "name": self.name, "build": f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', repr(fn))}",
-                "source_sha256": hashlib.sha256(source.encode()).hexdigest(), "size": self.size,
+        return {"family": self.kind, "name": self.name, **function_fingerprint(self.build_fn), "size": self.size,
                 "returns": "chain" if self.returns_chain else "radii",
                 "observed": None if self.observed is None else list(self.observed), "n": self._probe.n,
                 **({} if self.elastic else {"contact_model": self._probe.describe_model()})}

@@ -1,7 +1,7 @@
 """Numba-compiled kernels: pure functions over arrays, scalars and the grouped records of ``records``.
 
 The Numba backend (``granchain.backends.numba_backend``) binds an integrator and a chain to these:
-it validates, allocates, fills the records and calls the kernel :func:`dispatch.chain_kernel` picks (one chain) or
+it validates, allocates, fills the records and calls the kernel :func:`~granchain.backends.kernels.dispatch.chain_kernel` picks (one chain) or
 :func:`batch.integrate_batch` (many). Every kernel runs unchanged under ``NUMBA_DISABLE_JIT=1``
 (slowly), which the test-suite checks. The modules, by concern:
 
