@@ -31,10 +31,12 @@ PROBE = textwrap.dedent(
         gc.run_ensemble(6, realizations=2, progress=False, chains="decorated")
     elif job == "damped":
         gc.simulate(small.with_dissipation(0.05))
-    names = ["dp5_chain", "dp5_chain_general", "rkn4_chain", "rkn4_chain_general", "verlet_chain"]
+    names = ["dp5_chain", "dp5_chain_general", "rkn4_chain", "rkn4_chain_general", "verlet_chain",
+             "verlet_chain_general"]
     used = {name: len(getattr(dispatch, name).signatures) for name in names}
     used.update({name: len(getattr(batch, name).signatures) for name in
-                 ["dp5_batch", "dp5_batch_general", "rkn4_batch", "rkn4_batch_general", "verlet_batch"]})
+                 ["dp5_batch", "dp5_batch_general", "rkn4_batch", "rkn4_batch_general", "verlet_batch",
+                  "verlet_batch_general"]})
     print(json.dumps(used))
     """
 )

@@ -20,7 +20,8 @@ from numba import njit, prange
 from ..._status import SUCCESS
 from .aligned import accumulate_aligned
 from .forces import final_energy, impulse_energy
-from .dispatch import dp5_chain, dp5_chain_general, rkn4_chain, rkn4_chain_general, verlet_chain
+from .dispatch import (dp5_chain, dp5_chain_general, rkn4_chain, rkn4_chain_general, verlet_chain,
+                       verlet_chain_general)
 from .jit import JIT, JIT_INLINE, JIT_PARALLEL
 from .records import (
     INFO_DISSIPATED,
@@ -201,6 +202,13 @@ def verlet_batch(batch, method, run, tally, rows, sums, partials):
     integrate_batch(verlet_chain, batch, method, run, tally, rows, sums, partials)
 
 
+@njit(**JIT_PARALLEL)
+def verlet_batch_general(batch, method, run, tally, rows, sums, partials):
+    """:func:`integrate_batch` with ``dispatch.verlet_chain_general``."""
+    integrate_batch(verlet_chain_general, batch, method, run, tally, rows, sums, partials)
+
+
 #: The ensemble kernel of each single-chain entry point.
 BATCH_KERNELS = {dp5_chain: dp5_batch, dp5_chain_general: dp5_batch_general, rkn4_chain: rkn4_batch,
-                 rkn4_chain_general: rkn4_batch_general, verlet_chain: verlet_batch}
+                 rkn4_chain_general: rkn4_batch_general, verlet_chain: verlet_batch,
+                 verlet_chain_general: verlet_batch_general}

@@ -62,8 +62,14 @@ def rkn4_chain_general(method, model, run, state, out):
 
 @njit(**JIT)
 def verlet_chain(method, model, run, state, out):
-    """Velocity Verlet, params = [dt]."""
-    return verlet_integrate(method.params[0], model, run, state, out)
+    """Velocity Verlet on the paper's chain, params = [dt]."""
+    return verlet_integrate(False, method.params[0], model, run, state, out)
+
+
+@njit(**JIT)
+def verlet_chain_general(method, model, run, state, out):
+    """Velocity Verlet with a static load (Verlet refuses damping: its forces may not read velocities)."""
+    return verlet_integrate(True, method.params[0], model, run, state, out)
 
 
 def is_general(params) -> bool:
@@ -73,9 +79,9 @@ def is_general(params) -> bool:
 
 def chain_kernel(kind: int, params):
     """The entry point for a method ``kind`` (``records.KIND_*``) and a model's ``params``."""
-    if kind == KIND_VERLET:
-        return verlet_chain
     general = is_general(params)
+    if kind == KIND_VERLET:
+        return verlet_chain_general if general else verlet_chain
     if kind == KIND_DP5:
         return dp5_chain_general if general else dp5_chain
     if kind == KIND_RKN4:

@@ -81,8 +81,11 @@ def open_contact_behind(x, c, p, lo, target):
 
 @njit(**JIT_INLINE)
 def is_finite_window(x, v, hi):
-    """Every integrated position and velocity (granules 0..hi-1 of the views) is finite."""
+    """Every integrated position and velocity (granules 0..hi-1 of the views) is finite.
+
+    Without a branch per granule (|y| < inf is False for inf and NaN), so that the test vectorises: it
+    runs after every step, and a loop that returns at the first bad value cost Verlet ~15 % per step."""
+    ok = True
     for k in range(hi):
-        if not (math.isfinite(x[k]) and math.isfinite(v[k])):
-            return False
-    return True
+        ok &= (abs(x[k]) < math.inf) & (abs(v[k]) < math.inf)
+    return ok
