@@ -363,8 +363,7 @@ def long_signatures(functions: dict, limit: int = MAX_POSITIONAL) -> dict:
 #: arrays one by one: they are the loops' bodies, not seams.)
 CHAIN_KERNELS = ("dispatch.dp5_chain", "dispatch.dp5_chain_general", "dispatch.rkn4_chain", "dispatch.rkn4_chain_general",
                  "dispatch.verlet_chain", "dispatch.verlet_chain_general")
-ENTRY_POINTS = CHAIN_KERNELS + ("batch.integrate_batch", "rkloop.rk_integrate", "rkloop.dp5_loop", "rkloop.dp5_loop_general",
-                                "rkloop.rkn4_loop", "rkloop.rkn4_loop_general", "rkloop._rk_loop", "verlet.verlet_integrate")
+ENTRY_POINTS = CHAIN_KERNELS + ("batch.integrate_batch", "rkloop.rk_integrate", "rkloop._rk_loop", "verlet.verlet_integrate")
 
 
 def test_no_compiled_entry_point_takes_more_than_8_positional_parameters():

@@ -129,6 +129,10 @@ def first_root(method, what, i, f01, step, fm, Q, Qv):
     Illinois (modified regula falsi) while the bracket has a strictly negative end; bisection
     while it ends on an exact zero (a contact that opened: the acceleration is then zero on a
     whole interval and the first zero is wanted).
+
+    ``what`` is a literal at each call site, so Numba compiles one specialisation per function
+    followed (~0.5 s each on a first run): with ``what`` a run-time value the decorated ensembles
+    ran ~3 % slower (every peak is located by this loop; same-process timings at N = 26).
     """
     lo, hi = 0.0, 1.0
     f_lo, f_hi = f01

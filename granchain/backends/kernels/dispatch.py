@@ -25,7 +25,7 @@ from numba import njit
 
 from .jit import JIT
 from .records import KIND_DP5, KIND_RKN4, KIND_VERLET, Steps
-from .rkloop import dp5_loop, dp5_loop_general, rk_integrate, rkn4_loop, rkn4_loop_general
+from .rkloop import rk_integrate
 from .verlet import verlet_integrate
 
 
@@ -39,25 +39,25 @@ def _steps(params):
 @njit(**JIT)
 def dp5_chain(method, model, run, state, out):
     """DP5 on the paper's chain (elastic, unloaded: ``forces.accelerations`` with ``general`` False)."""
-    return rk_integrate(dp5_loop, _steps(method.params), model, run, state, out)
+    return rk_integrate(KIND_DP5, False, _steps(method.params), model, run, state, out)
 
 
 @njit(**JIT)
 def dp5_chain_general(method, model, run, state, out):
     """DP5 with real contacts (a static load, viscoelastic damping)."""
-    return rk_integrate(dp5_loop_general, _steps(method.params), model, run, state, out)
+    return rk_integrate(KIND_DP5, True, _steps(method.params), model, run, state, out)
 
 
 @njit(**JIT)
 def rkn4_chain(method, model, run, state, out):
     """RKN4(3) on the paper's chain."""
-    return rk_integrate(rkn4_loop, _steps(method.params), model, run, state, out)
+    return rk_integrate(KIND_RKN4, False, _steps(method.params), model, run, state, out)
 
 
 @njit(**JIT)
 def rkn4_chain_general(method, model, run, state, out):
     """RKN4(3) with a static load (RKN4 refuses damping: its forces may not read velocities)."""
-    return rk_integrate(rkn4_loop_general, _steps(method.params), model, run, state, out)
+    return rk_integrate(KIND_RKN4, True, _steps(method.params), model, run, state, out)
 
 
 @njit(**JIT)

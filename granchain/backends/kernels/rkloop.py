@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import literally, njit
 
 from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW
 from . import dp5, rkn4
@@ -108,16 +108,15 @@ def error_norm(method, x, v, xs, vs, Kx, Kv, h, hi, relaxed, steps, ratio):
     return ratio[0]
 
 
-# Inlined into each entry point of ``dispatch`` (it is only the set-up around the loop): passed to a
-# compiled function, a first-class function is a run-time object that Numba cannot cache.
+# Inlined into each entry point of ``dispatch`` (it is only the set-up around the loop), so that
+# ``method`` and ``general`` reach the step loop as constants.
 @njit(**JIT_INLINE)
-def rk_integrate(loop, steps, model, run, state, out):
+def rk_integrate(method, general, steps, model, run, state, out):
     """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
-    final state) with the step ``loop`` (:func:`dp5_loop`, or :func:`rkn4_loop`: the
-    Runge-Kutta-Nystrom pair of ``rkn4``, same loop, step control and records; their ``_general``
-    variants for real contacts; a first-class function, so each is compiled only when used) and its
-    step control ``steps`` (``records.Steps``), recording into ``out`` (``records.Outputs``) what
-    ``run`` asks (``records.Run``).
+    final state) with the Runge-Kutta ``method`` (``records.KIND_DP5``, or ``KIND_RKN4``: the
+    Runge-Kutta-Nystrom pair of ``rkn4``, same loop, step control and records; ``general`` True for
+    real contacts: see :func:`_rk_loop`) and its step control ``steps`` (``records.Steps``),
+    recording into ``out`` (``records.Outputs``) what ``run`` asks (``records.Run``).
 
     For each observed granule q (0-based index run.observed[q]) the kernel writes the maximum
     velocity ``peak_v[q]`` and its time ``peak_t[q]`` (see ``peaks.is_new_peak`` for ties), and the
@@ -186,43 +185,22 @@ def rk_integrate(loop, steps, model, run, state, out):
     scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
                borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen), borrowed(op), borrowed(f0p),
                borrowed(Pd))
-    status = loop(steps, bmodel, brun, bstate, bout, scratch)
+    status = _rk_loop(method, general, steps, bmodel, brun, bstate, bout, scratch)
     keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd)
     x[:] = xp[:M]
     v[:] = vp[:M]
     return status
 
 
+# One compiled loop per (method, general), the two arguments literal values (``numba.literally``): each
+# specialisation is compiled, and cached, only when a run uses it, and the two are constants in its
+# machine code (a literal argument is lowered as its value), so that LLVM drops the other method's
+# branches and, for the paper's chain (``general`` False), the real contacts' code (compiled once with
+# the method a run-time value, the loop cost DP5 ~6 % more per realisation; see forces.accelerations
+# for ``general``). The loop used to be inlined at the Numba-IR level into one
+# wrapper per specialisation: inlining deep-copies the loop's IR, and that copy was ~8 s of the ~22 s a
+# first DP5 run compiled (measured with an empty cache).
 @njit(**JIT)
-def dp5_loop(steps, model, run, state, out, scratch):
-    """:func:`_rk_loop` with DP5, for the paper's chain."""
-    return _rk_loop(KIND_DP5, False, steps, model, run, state, out, scratch)
-
-
-@njit(**JIT)
-def dp5_loop_general(steps, model, run, state, out, scratch):
-    """:func:`_rk_loop` with DP5, for real contacts."""
-    return _rk_loop(KIND_DP5, True, steps, model, run, state, out, scratch)
-
-
-@njit(**JIT)
-def rkn4_loop(steps, model, run, state, out, scratch):
-    """:func:`_rk_loop` with RKN4(3), for the paper's chain."""
-    return _rk_loop(KIND_RKN4, False, steps, model, run, state, out, scratch)
-
-
-@njit(**JIT)
-def rkn4_loop_general(steps, model, run, state, out, scratch):
-    """:func:`_rk_loop` with RKN4(3), for real contacts (a static load: RKN4 refuses damping)."""
-    return _rk_loop(KIND_RKN4, True, steps, model, run, state, out, scratch)
-
-
-# Inlined into the four loops above, each with its method and ``general`` constants, so that the
-# compiler drops the other method's branches (compiled once with the method a run-time value, the loop
-# cost DP5 ~6 % more per realisation, same-process timing at N = 26) and, for the paper's chain, the
-# code of the real contacts (see forces.accelerations). Each loop is compiled only when a run uses it
-# (``dispatch``).
-@njit(**JIT_INLINE)
 def _rk_loop(method, general, steps, model, run, state, out, scratch):
     """The step loop of :func:`rk_integrate`, on borrowed arrays (``memory.borrowed``: no reference
     counting in the loop): its records, with the state (x, v), the stiffness and the inverse masses
@@ -231,6 +209,8 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
     ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); error
     ratios ``ratio`` (2 Mp); static overlaps and forces ``op``, ``f0p`` (Mp, ``forces.static_state``);
     the stages' dissipated power ``Pd`` (7)) in the tuple ``scratch``."""
+    literally(method)
+    literally(general)
     inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd = scratch
     m, c, p = model.masses, model.stiffness, model.params
     x, v = state
