@@ -173,7 +173,7 @@ def main(argv=None):
                              ("DP5()", gc.DP5(), None)):
         sec, steps, err = per_chain(lambda i, integ=integ: gc.simulate(chains[i], integ))
         verdict = "" if aim is None else f" [aim >= {aim:g}x: {'PASS' if base / sec >= aim else 'MISS'}]"
-        extra = "" if dt_velocity == dt_contract else f", {loose / sec:.2f}x the loop at dt = {dt_velocity:.2e}"
+        extra = "" if dt_velocity == dt_contract else f", {loose / sec:.2f}x ahead of the loop at dt = {dt_velocity:.2e}"
         print(f"{name:44s} {1e3 * sec:7.2f} ms per chain ({steps:6.0f} steps, errors {err[0]:.1e}, {err[1]:.1e}): "
               f"{base / sec:5.2f}x ahead of the plain loop{verdict}{extra}")
     sec, steps, err = per_chain(lambda i: gc.simulate(chains[i], gc.Verlet(dt_contract)))

@@ -197,9 +197,9 @@ def rk_integrate(method, general, steps, model, run, state, out):
 # machine code (a literal argument is lowered as its value), so that LLVM drops the other method's
 # branches and, for the paper's chain (``general`` False), the real contacts' code (compiled once with
 # the method a run-time value, the loop cost DP5 ~6 % more per realisation; see forces.accelerations
-# for ``general``). The loop used to be inlined at the Numba-IR level into one
-# wrapper per specialisation: inlining deep-copies the loop's IR, and that copy was ~8 s of the ~22 s a
-# first DP5 run compiled (measured with an empty cache).
+# for ``general``). The loop used to be inlined at the Numba-IR level into one wrapper per
+# specialisation: inlining deep-copies the loop's IR, and that copy was ~8 s of the ~22 s a first DP5
+# run compiled (measured with an empty cache).
 @njit(**JIT)
 def _rk_loop(method, general, steps, model, run, state, out, scratch):
     """The step loop of :func:`rk_integrate`, on borrowed arrays (``memory.borrowed``: no reference
