@@ -65,7 +65,9 @@ def add_parser(subparsers) -> None:
                        help="absolute tolerance (defaults: decorated chains rkn4 1e-8, dp5 1e-9; effective 5e-11; the others "
                             "2e-12; dop853)")
     integ.add_argument("--error-control", choices=("relaxed", "windowed", "exact"), default="relaxed",
-                       help=f"{' and '.join(taking('relaxed_lag'))} only. relaxed (default): looser tolerance for the granules the pulse has passed; "
+                       help=f"{' and '.join(taking('relaxed_lag'))} only. relaxed (default): looser tolerance for the granules the pulse has passed "
+                            "(decorated and effective chains; the other kinds keep every granule at 2e-9, since "
+                            "their granules can peak after the pulse has passed); "
                             "windowed: also drop them from the integration a few granules behind the pulse (cost linear "
                             "in N; peaks as accurate, the averaged pulse's tail not kept); exact: every granule to the end "
                             "at full tolerance (--integrator dp5 --rtol 1e-6 --atol 1e-9: granchain < 0.3)")
