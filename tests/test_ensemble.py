@@ -47,7 +47,7 @@ PER_REALISATION = ("small_radius", "peak_velocity", "peak_time", "status", "ener
 AVERAGED = ("mean_velocity", "mean_velocity_stderr", "n_valid")
 COORDS = ("chain", "realization", "granule", "gap", "time")
 FIXED_POINT_ULP = 2.0**-40  # the fixed-point resolution of the velocity sums (fixed_point_bits = 40)
-DEFAULT_DECORATED = gc.RKN4.relaxed(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL)  # the ensembles' default integrator (decorated chains)
+DEFAULT_DECORATED = gc.RKN4.windowed(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL)  # the ensembles' default integrator (decorated chains)
 
 
 @pytest.fixture(autouse=True)
@@ -399,7 +399,7 @@ def test_every_variable_is_described(local):
     integrator = json.loads(local.attrs["granchain_integrator"])
     assert integrator == params["integrator"] == {"name": "rkn4", "rtol": gc.ENSEMBLE_RTOL, "atol": gc.ENSEMBLE_ATOL,
                                                    "first_step": 1e-3, "fixed_step": None, "relaxed_lag": 4,
-                                                   "relaxed_factor": 1000.0, "window_lag": None}
+                                                   "relaxed_factor": 1000.0, "window_lag": 7}
     assert local.attrs["rtol"] == gc.ENSEMBLE_RTOL and local.attrs["integrator"] == "rkn4"
     assert local.attrs["granchain_version"] == gc.__version__
 

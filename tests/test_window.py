@@ -1,8 +1,8 @@
-"""Goal-oriented error control in DP5 and RKN4 (issue 9): the relaxed zone and the trailing window.
+"""Goal-oriented error control in DP5 and RKN4: the relaxed zone and the trailing window.
 
-``DP5.relaxed()`` / ``RKN4.relaxed()`` (the ensembles' defaults: RKN4 for decorated chains, DP5 for
-the others) loosen the tolerance of the granules the pulse has passed; ``windowed()`` also drops
-them from the integration a few granules behind the pulse. What is checked:
+``DP5.relaxed()`` / ``RKN4.relaxed()`` loosen the tolerance of the granules the pulse has passed; ``windowed()`` also drops
+them from the integration a few granules behind the pulse (the ensembles' defaults: RKN4 for decorated
+chains, DP5 for their effective chains). What is checked:
 
 1. accuracy contract against DOP853 (rtol 1e-10, atol 1e-12) on seeded random N = 26 decorated
    chains and their effective chains, with the relaxed and the windowed integrator at each chain
@@ -13,15 +13,16 @@ them from the integration a few granules behind the pulse. What is checked:
    force. 3 chains of each kind in the default suite, 20 under ``-m slow`` (DOP853 results cached
    per module). Negative control: the effective chain at the decorated tolerance misses it;
 2. the averaged pulse <v_k(t)> of an N = 26 decorated ensemble (150 realisations; 500 under
-   ``-m slow``): the relaxed default (RKN4) and DP5.relaxed() within 1e-4 and within 0.1 standard
-   error of the exact DP5(1e-6, 1e-9);
-   the maxima max_t <v_k(t)> within 1e-6 (relative) for relaxed and windowed; the windowed pulse
-   agrees up to each granule's maximum but not in the tail (the documented limitation: the
-   negative control of the averaged-pulse criterion);
+   ``-m slow``): the relaxed integrators (RKN4, and DP5.relaxed()) within 1e-4 and within 0.1 standard
+   error of the exact DP5(1e-6, 1e-9) on the whole grid; the default (windowed, with each granule's
+   averaged-pulse window) the same inside the windows, NaN after them, and windows that hold every
+   realisation's pulse (``granchain.ensembles.pulse_window.check``);
+   the maxima max_t <v_k(t)> within 1e-6 (relative) for all of them; the trailing window without
+   averaged-pulse windows agrees up to each granule's maximum but not in the tail (the negative
+   control of the averaged-pulse criterion);
 3. ensembles with ``DP5.windowed()``: bitwise the same per-realisation results and sums for chunk
-   sizes 1/7/64 and 1 or 2 Numba threads (slow: a Dask cluster and a store), and every row bitwise
-   ``simulate(family.chain(seed, i), DP5.windowed())`` (the relaxed default is covered by
-   tests/test_families.py);
+   sizes 1/7/64 and 1 or 2 Numba threads (slow: a Dask cluster and a store), and without the
+   averaged-pulse windows every row bitwise ``simulate(family.chain(seed, i), DP5.windowed())``;
 4. exact mode: ``DP5()`` and ``DP5(1e-6, 1e-9)`` integrate every granule to the end (window start
    0), a relaxed zone with factor 1 is bitwise the exact run, the relaxed zone alone never cuts,
    the window really cuts on N = 26 and both take fewer steps than the exact run;
@@ -65,7 +66,7 @@ from granchain.solve.simulation import default_t_max
 
 N = 26
 KINDS = ("decorated", "effective")
-EXACT = gc.DP5(1e-6, 1e-9)  # the ensembles' integrator before issue 9: every granule to the end
+EXACT = gc.DP5(1e-6, 1e-9)  # the ensembles' integrator before granchain 0.3: every granule to the end
 FAST_SEEDS = (0, 1, 2)
 SWEEP_SEEDS = tuple(range(20))
 
@@ -83,8 +84,8 @@ def chain_of(seed: int, kind: str) -> gc.Chain:
 def goal_integrators(kind: str) -> dict:
     """The relaxed integrator the ensembles use for ``kind``, the windowed one at the same method and
     tolerances, and (decorated chains) ``DP5.relaxed()``, the default before RKN4."""
-    relaxed = ens.ensemble_integrator(kind)
-    out = {"relaxed": relaxed, "windowed": type(relaxed).windowed(relaxed.rtol, relaxed.atol)}
+    relaxed = ens.ensemble_integrator(kind, windowed=False)
+    out = {"relaxed": relaxed, "windowed": ens.ensemble_integrator(kind)}
     if kind == "decorated":
         out["dp5-relaxed"] = gc.DP5.relaxed()
     return out
@@ -136,19 +137,23 @@ def dop853(reference):
 
 
 # -- 1. accuracy contract against DOP853 ------------------------------------------------------------
-def test_ensemble_defaults_are_the_relaxed_integrators():
-    """The integrators of section 1 are the ensembles' defaults: RKN4.relaxed() for decorated chains, the
-    relaxed DP5 at tight tolerances for the others (effective)."""
-    assert ens.ensemble_integrator() == ens.ensemble_integrator("decorated") == gc.RKN4.relaxed()
+def test_ensemble_defaults_are_the_windowed_integrators():
+    """The integrators of section 1 are the ensembles' defaults: RKN4.windowed() for decorated chains, the
+    windowed DP5 at tight tolerances for the others (effective); with ``windowed=False`` (run_ensemble's
+    pulse_window="full") the relaxed ones at the same tolerances."""
+    assert ens.ensemble_integrator() == ens.ensemble_integrator("decorated") == gc.RKN4.windowed()
+    assert ens.ensemble_integrator("decorated", windowed=False) == gc.RKN4.relaxed()
     assert gc.RKN4.relaxed() == gc.RKN4(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL, relaxed_lag=RELAXED_LAG,
                                         relaxed_factor=RELAXED_FACTOR)
-    assert ens.ensemble_integrator("effective") == gc.DP5.relaxed(gc.SMOOTH_RTOL, gc.SMOOTH_ATOL)
+    assert ens.ensemble_integrator("effective") == gc.DP5.windowed(gc.SMOOTH_RTOL, gc.SMOOTH_ATOL)
+    assert ens.ensemble_integrator("effective", windowed=False) == gc.DP5.relaxed(gc.SMOOTH_RTOL, gc.SMOOTH_ATOL)
     assert gc.DP5.relaxed() == gc.DP5(1e-6, 1e-9, relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)
     for cls, rtol, atol in ((gc.DP5, 1e-6, 1e-9), (gc.RKN4, 1e-5, 1e-8)):
         assert cls.windowed() == cls(rtol, atol, relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR,
                                      window_lag=WINDOW_LAG)
     for kind in KINDS:
-        relaxed = ens.ensemble_integrator(kind)
+        windowed, relaxed = ens.ensemble_integrator(kind), ens.ensemble_integrator(kind, windowed=False)
+        assert windowed == type(windowed).windowed(windowed.rtol, windowed.atol)
         assert relaxed == type(relaxed).relaxed(relaxed.rtol, relaxed.atol) and not relaxed.is_exact
         assert relaxed.window_lag is None
 
@@ -240,10 +245,13 @@ def _averaged_pulses(realizations: int) -> dict:
     family = gc.RandomDecorated(N)
     kw = dict(realizations=realizations, seed=9, chains="decorated", chunk_size=realizations, progress=False)
     out = {}
-    cases = (("exact", EXACT), ("relaxed", ens.ensemble_integrator()), ("windowed", gc.RKN4.windowed()),
-             ("dp5-relaxed", gc.DP5.relaxed()))
-    for name, integrator in cases:
-        ds = gc.run_ensemble(family, integrator=integrator, **kw).isel(chain=0)
+    # "windowed": the trailing window without averaged-pulse windows (pulse_window="full", the 0.4 behaviour);
+    # "default": the ensembles' default, the same integrator with each granule's averaged-pulse window.
+    cases = (("exact", EXACT, "full"), ("relaxed", ens.ensemble_integrator(windowed=False), "full"),
+             ("windowed", gc.RKN4.windowed(), "full"), ("dp5-relaxed", gc.DP5.relaxed(), "full"),
+             ("default", None, "auto"))
+    for name, integrator, window in cases:
+        ds = gc.run_ensemble(family, integrator=integrator, pulse_window=window, **kw).isel(chain=0)
         assert int(ds["n_valid"]) == realizations, f"{name}: failed integrations"
         out[name] = ds
     return out
@@ -288,7 +296,34 @@ def test_relaxed_keeps_the_averaged_pulse(request, realizations, name):
 
 
 @pytest.mark.parametrize("realizations", AVERAGED)
-@pytest.mark.parametrize("name", ["relaxed", "windowed", "dp5-relaxed"])
+def test_default_keeps_the_averaged_pulse_in_each_granules_window(request, realizations):
+    """The default (trailing window, each granule's averaged-pulse window): wherever <v_k(t)> is recorded
+    (t <= pulse_window_end) it passes the relaxed criterion against the exact DP5 (granule k is integrated
+    there in every realisation), after it it is NaN (not computed), and the windows hold the pulse: the
+    averaged pulse's maximum inside, every realisation's arrival before the window's end and its pulse
+    past granule k + L (L the trailing window's lag) when the window closes (pulse_window.check). The
+    windows are finite for every granule but the last L (there the trailing window never cuts)."""
+    from granchain.ensembles import pulse_window
+
+    p = _pulses(request, realizations)
+    ds, ref = p["default"], p["exact"]
+    ends = ds["pulse_window_end"]
+    assert int(ds["pulse_window_lag"]) == WINDOW_LAG
+    assert np.all(np.isfinite(ends[:N - WINDOW_LAG])) and np.all(np.isinf(ends[N - WINDOW_LAG:]))
+    inside = ds["time"] <= ends
+    assert bool(ds["mean_velocity"].where(~inside).isnull().all()), "values recorded past a window's end"
+    assert bool(ds["mean_velocity"].where(inside, 0.0).notnull().all()), "a value missing inside a window"
+    worst, in_stderr = pulse_deviation(ds.fillna(ref), ref)  # outside the windows: ref itself, no difference
+    assert worst < 1e-4 and in_stderr < 0.1, (worst, in_stderr)
+    check = pulse_window.check(ds.expand_dims("chain"))
+    assert bool(check["peak_inside"].all()) and float(check["margin"].min()) > 0.0
+    assert int(check["unfinished"].sum()) == 0, check["unfinished"].values
+    # negative control: the trailing window alone (granules report the velocity they left with) fails it
+    assert pulse_deviation(p["windowed"], ref)[0] > 1e-4
+
+
+@pytest.mark.parametrize("realizations", AVERAGED)
+@pytest.mark.parametrize("name", ["relaxed", "windowed", "dp5-relaxed", "default"])
 def test_averaged_pulse_maxima_are_kept(request, realizations, name):
     """max_t <v_k(t)> within 1e-6 (relative) of the exact DP5's (measured ~1e-8)."""
     p = _pulses(request, realizations)
@@ -320,6 +355,7 @@ SUMS = ("mean_velocity", "mean_velocity_stderr", "n_valid")
 
 
 def _windowed_ensemble(**kw):
+    """DP5.windowed() with the averaged-pulse windows (the default ``pulse_window="auto"``)."""
     args = dict(realizations=R, seed=SEED, chunk_size=7, threads=2, integrator=gc.DP5.windowed(), progress=False) | kw
     return gc.run_ensemble(gc.RandomDecorated(N), **args)
 
@@ -339,8 +375,10 @@ def test_windowed_ensemble_does_not_depend_on_chunks_or_threads(windowed_ensembl
     assert_same_results(_windowed_ensemble(chunk_size=chunk_size, threads=threads), windowed_ensemble)
 
 
-def test_windowed_ensemble_rows_are_simulate(windowed_ensemble):
-    ds = windowed_ensemble
+def test_windowed_ensemble_rows_are_simulate():
+    """Without averaged-pulse windows (``pulse_window="full"``) a windowed ensemble's rows are simulate's."""
+    ds = _windowed_ensemble(pulse_window="full")
+    assert "pulse_window_end" not in ds
     family = gc.RandomDecorated(N)
     assert json.loads(ds.attrs["granchain_integrator"]) == gc.DP5.windowed().describe()
     for name in family.chains:
@@ -525,7 +563,7 @@ def test_bad_goal_settings_name_the_parameter(kw, words):
 
 
 def test_describe_records_the_goal_settings_only_when_used():
-    old_keys = {"name", "rtol", "atol", "first_step", "fixed_step"}  # the record before issue 9
+    old_keys = {"name", "rtol", "atol", "first_step", "fixed_step"}  # the record before granchain 0.3
     assert set(gc.DP5().describe()) == set(EXACT.describe()) == old_keys
     windowed = gc.DP5.windowed().describe()
     assert windowed["window_lag"] == WINDOW_LAG and windowed["relaxed_lag"] == RELAXED_LAG

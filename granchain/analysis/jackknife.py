@@ -85,7 +85,9 @@ class ChunkSums:
 
     ``sum_v``, ``sum_v2``: int64 fixed point (chunk, chain, granule, time), value =
     integer / 2**``fixed_point_bits``; ``n_valid``: (chunk, chain). Only finished chunks
-    belong here (see :meth:`from_store`).
+    belong here (see :meth:`from_store`). ``window_end`` (chain, granule), optional: the averaged
+    pulse's windows of a run with them (the store's ``pulse_window_end``); means past them are NaN, as
+    the store's ``mean_velocity`` (the sums hold nothing there).
     """
 
     sum_v: np.ndarray
@@ -94,6 +96,7 @@ class ChunkSums:
     fixed_point_bits: int
     chains: tuple
     time: np.ndarray
+    window_end: np.ndarray | None = None
 
     def __post_init__(self):
         sv, sv2, nv = (np.asarray(a) for a in (self.sum_v, self.sum_v2, self.n_valid))
@@ -116,7 +119,8 @@ class ChunkSums:
         done = prog["done"].values.astype(bool)
         return cls(prog["sum_v"].values[done], prog["sum_v2"].values[done], prog["n_valid"].values[done],
                    int(root.attrs["fixed_point_bits"]), tuple(str(c) for c in root["chain"].values),
-                   np.asarray(root["time"].values, dtype=float))
+                   np.asarray(root["time"].values, dtype=float),
+                   root["pulse_window_end"].values if "pulse_window_end" in root else None)
 
     @property
     def chunks(self) -> int:
@@ -130,7 +134,10 @@ class ChunkSums:
             s, n = s - sv[leave_out], n - nv[leave_out]  # exact: integer arithmetic
         with np.errstate(invalid="ignore", divide="ignore"):
             m = (s.astype(float) / 2.0**self.fixed_point_bits) / n.astype(float)[:, None, None]
-        return np.where(n[:, None, None] > 0, m, np.nan)
+        m = np.where(n[:, None, None] > 0, m, np.nan)
+        if self.window_end is not None:
+            m[np.asarray(self.time)[None, None, :] > np.asarray(self.window_end)[:, :, None]] = np.nan
+        return m
 
 
 def chunk_jackknife(statistic, sums: ChunkSums) -> Jackknife:

@@ -76,8 +76,9 @@ class Backend:
         raise NotImplementedError
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls, scale: float, out: dict, model: dict | None = None) -> None:
-        """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time."""
+                        controls, scale: float, out: dict, model: dict | None = None, pulse_end=None) -> None:
+        """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time.
+        ``pulse_end`` is not read: it bounds the trailing window, and the integrators run here have none."""
         from .kernels.aligned import accumulate_aligned
         from .kernels.batch import (
             accumulate_fixed_point,

@@ -74,12 +74,18 @@ def run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed=None) -> Run
     forces of the contacts ``sensed`` on it) and when to stop (``t_max``, or the pulse's exit with
     ``stop_at_exit``; ``controls``: :class:`granchain.RunControls`)."""
     return Run(chain.observed, t_grid, float(t_max), bool(stop_at_exit), controls.exit_margin, controls.max_steps,
-               controls.peak_rtol, no_contacts() if sensed is None else np.ascontiguousarray(sensed, dtype=np.int64))
+               controls.peak_rtol, no_contacts() if sensed is None else np.ascontiguousarray(sensed, dtype=np.int64),
+               no_windows())
 
 
 def no_contacts() -> np.ndarray:
     """An empty list of contacts (nothing recorded on the grid but velocities and the wall force)."""
     return np.zeros(0, dtype=np.int64)
+
+
+def no_windows() -> np.ndarray:
+    """No averaged-pulse windows (an empty ``records.Run.pulse_end``): the trailing window alone decides."""
+    return np.zeros(0)
 
 
 def outputs(n_observed: int, n_grid: int, n_granules: int, n_sensed: int = 0) -> Outputs:
@@ -105,7 +111,7 @@ class NumbaBackend(Backend):
         return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f, out.grid_c
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls, scale: float, out: dict, model: dict | None = None) -> None:
+                        controls, scale: float, out: dict, model: dict | None = None, pulse_end=None) -> None:
         import numba
 
         integrator.check_chains(masses, stiffness, n, initial_velocity)
@@ -114,8 +120,9 @@ class NumbaBackend(Backend):
         method = method_record(effective_integrator(integrator, first))
         lags, sum_a, sum_a2 = aligned_outputs(out, observed.shape[0])
         limits = np.ascontiguousarray(np.broadcast_to(np.asarray(t_max, dtype=float), masses.shape[:1]))
+        ends = no_windows() if pulse_end is None else np.ascontiguousarray(pulse_end, dtype=float)
         run = Run(observed, t_grid, float(limits.max()), first.ends_at_exit, controls.exit_margin, controls.max_steps,
-                  controls.peak_rtol, no_contacts())
+                  controls.peak_rtol, no_contacts(), ends)
         # Dynamic scheduling, one realisation at a time. Realisations differ in cost by up to 16x
         # (N = 6 decorated chains), and Numba's default static split (each thread a contiguous
         # half of the batch) left a thread idle for 1.2-3.6 % of a 1000-realisation chunk of the

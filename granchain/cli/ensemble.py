@@ -64,13 +64,22 @@ def add_parser(subparsers) -> None:
     integ.add_argument("--atol", type=float, default=None,
                        help="absolute tolerance (defaults: decorated chains rkn4 1e-8, dp5 1e-9; effective 5e-11; the others "
                             "2e-12; dop853)")
-    integ.add_argument("--error-control", choices=("relaxed", "windowed", "exact"), default="relaxed",
-                       help=f"{' and '.join(taking('relaxed_lag'))} only. relaxed (default): looser tolerance for the granules the pulse has passed "
-                            "(decorated and effective chains; the other kinds keep every granule at 2e-9, since "
-                            "their granules can peak after the pulse has passed); "
-                            "windowed: also drop them from the integration a few granules behind the pulse (cost linear "
-                            "in N; peaks as accurate, the averaged pulse's tail not kept); exact: every granule to the end "
-                            "at full tolerance (--integrator dp5 --rtol 1e-6 --atol 1e-9: granchain < 0.3)")
+    integ.add_argument("--error-control", choices=("windowed", "relaxed", "exact"), default=None,
+                       help=f"{' and '.join(taking('relaxed_lag'))} only. Default: windowed for decorated and effective "
+                            "chains, exact for the other kinds (their granules can peak after the pulse has passed). "
+                            "windowed: looser tolerance for the granules the pulse has passed, and drop them from the "
+                            "integration a few granules behind it (cost linear in N); each granule's averaged pulse is "
+                            "kept in a window that holds the pulse of every realisation (see --pulse-window); "
+                            "relaxed: the looser tolerance only, every granule integrated to the end (the wake long "
+                            "after the pulse on the whole time grid); exact: every granule to the end at full tolerance "
+                            "(--integrator dp5 --rtol 1e-6 --atol 1e-9: granchain < 0.3)")
+    integ.add_argument("--pulse-window", choices=("auto", "full"), default=None,
+                       help="with the trailing window (windowed): auto (default; a store is continued with the setting it "
+                            "was started with) records each granule's averaged pulse in a "
+                            "window of its own, set from the arrival times of the first 64 realisations, and NaN after it; "
+                            "full: no such window, granules behind the trailing window report the velocity they left it "
+                            "with (stores written with --error-control windowed before granchain 0.5). Without a trailing "
+                            "window every granule is recorded on the whole grid")
     integ.add_argument("--step", type=float, default=None, help=f"time step ({', '.join(taking('dt'))}; default 1e-3)")
     p.add_argument("--chunk-size", type=int, default=500, help="realisations per chunk, the unit of saving (default 500)")
     p.add_argument("--t-end", type=float, default=None, help="end of the time grid of the averaged pulse (default: past the pulse's exit)")
@@ -165,34 +174,47 @@ def build_integrator(args, chains, conservative: bool = True):
     import dataclasses
 
     from ..ensembles.run import RANDOM_ATOL, RANDOM_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, ensemble_integrator
-    from ..solve.integrators import DP5, INTEGRATORS, WINDOW_LAG
+    from ..solve.integrators import DP5, INTEGRATORS, RELAXED_LAG, WINDOW_LAG
 
     cls = None if args.integrator is None else INTEGRATORS[args.integrator]
     given = {"rtol": args.rtol, "atol": args.atol, "dt": args.step}
     fields = {f.name for f in dataclasses.fields(cls or DP5)}
     wrong = [f"--{'step' if k == 'dt' else k}" for k, v in given.items() if v is not None and k not in fields]
     adaptive = cls is None or issubclass(cls, DP5)  # DP5 and RKN4: the goal-oriented settings
-    if args.error_control != "relaxed" and not adaptive:
+    if args.error_control is not None and not adaptive:
         wrong.append("--error-control")
     if wrong:
         named = args.integrator or "rkn4/dp5 (the default)"
         raise ValueError(f"{', '.join(wrong)} does not apply to --integrator {named}")
     if not adaptive:
         return cls(**{k: v for k, v in given.items() if v is not None})
-    goal = {"relaxed": {}, "windowed": {"window_lag": WINDOW_LAG},
-            "exact": {"relaxed_lag": None, "window_lag": None}}[args.error_control]
+    # The zones asked for (relaxed zone and trailing window); without --error-control each kind's default:
+    # windowed for decorated and effective chains, exact for the others, which keep it with "relaxed" too
+    # (their granules can peak after the pulse has passed).
+    paper_kinds = ("decorated", "effective")
+    windowed = args.pulse_window != "full"  # the defaults' trailing window, unless the whole grid is asked
+    zones = {None: None, "relaxed": {"relaxed_lag": RELAXED_LAG, "window_lag": None},
+             "windowed": {"relaxed_lag": RELAXED_LAG, "window_lag": WINDOW_LAG},
+             "exact": {"relaxed_lag": None, "window_lag": None}}[args.error_control]
+
+    def goal(kind):
+        if zones is None or (args.error_control == "relaxed" and kind not in paper_kinds):
+            return {}
+        return zones
 
     def default(kind):  # the kind's ensemble default, or the named method at that kind's tolerances
         if cls is None:
-            return ensemble_integrator(kind, conservative=conservative)
+            return ensemble_integrator(kind, conservative=conservative, windowed=windowed)
+        zone = cls.windowed if windowed else cls.relaxed
         if kind == "decorated":
-            return cls.relaxed()
-        return cls.relaxed(SMOOTH_RTOL, SMOOTH_ATOL) if kind == "effective" else cls(RANDOM_RTOL, RANDOM_ATOL)
+            return zone()
+        return zone(SMOOTH_RTOL, SMOOTH_ATOL) if kind == "effective" else cls(RANDOM_RTOL, RANDOM_ATOL)
 
     if args.rtol is None and args.atol is None:  # each chain kind's default tolerances
-        return {c: dataclasses.replace(default(c), **goal) for c in chains}
+        return {c: dataclasses.replace(default(c), **goal(c)) for c in chains}
     cls = cls or DP5  # --rtol/--atol alone set DP5's, as run_ensemble(rtol=..., atol=...) does
-    return dataclasses.replace(cls.relaxed(), **{k: v for k, v in given.items() if v is not None}, **goal)
+    base = cls.windowed() if windowed else cls.relaxed()  # as run_ensemble(rtol=..., pulse_window=...)
+    return dataclasses.replace(base, **{k: v for k, v in given.items() if v is not None}, **(zones or {}))
 
 
 def _store_scale(path, scale) -> None:
@@ -233,6 +255,10 @@ def run(args) -> int:
         if not args.t_end > 0:
             raise ValueError(f"--t-end must be > 0, got {args.t_end}")
         grid = np.round(np.arange(0.0, args.t_end + 0.5 * args.dt, args.dt), 12)
+    if args.pulse_window is None:  # a store is continued as it was started (without windows before granchain 0.5)
+        from ..ensembles.pulse_window import stored_setting
+
+        args.pulse_window = stored_setting(args.out) if args.resume else "auto"
     chains = tuple(c.strip() for c in args.chain.split(","))
     if chains == ("both",) or len(family.chains) == 1 and args.chain == "both":
         chains = "both"
@@ -242,7 +268,7 @@ def run(args) -> int:
         ds = run_ensemble(
             family, realizations=args.realizations, seed=args.seed, chains=chains, integrator=integrator, t_grid=grid,
             chunk_size=args.chunk_size, out=args.out, resume=args.resume, client=client, progress=not args.quiet,
-            threads=args.threads,
+            threads=args.threads, pulse_window=args.pulse_window,
         )
     except KeyboardInterrupt:
         print(f"granchain ensemble: interrupted; finished chunks are saved in {args.out}. "

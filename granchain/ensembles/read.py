@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from .schema import ALIGNED, AVERAGED, FORCES, PROGRESS, PROGRESS_ALIGNED, RESULTS, WALL
+from .schema import ALIGNED, AVERAGED, FORCES, PROGRESS, PROGRESS_ALIGNED, RESULTS, WALL, WINDOW
 from .store import (
     _CHECKED_ATTRS,
     _PROGRESS_ABOUT,
@@ -143,7 +143,7 @@ def _todays_form(ds, group, params: str):
             records[name] = json.dumps(record[key], sort_keys=True)
     spec = _spec_of(record, ds)
     if spec is None:  # a CustomFamily (its function is not stored): the records and the results' metadata
-        _set_metadata(ds, {v.name: v.metadata() for v in RESULTS + FORCES + WALL + AVERAGED + ALIGNED})
+        _set_metadata(ds, {v.name: v.metadata() for v in RESULTS + FORCES + WALL + AVERAGED + ALIGNED + WINDOW})
         ds.attrs.update(records)
         return ds
     reference = empty_dataset(spec, lazy=True)
@@ -171,6 +171,7 @@ def _spec_of(record: dict, ds):
 
     from ..families import family_from_record
     from ..solve.integrators import RunControls, integrator_from_record
+    from .pulse_window import AUTO, FULL, ends_of_record
     from .run import EnsembleSpec
 
     try:
@@ -182,6 +183,9 @@ def _spec_of(record: dict, ds):
                 None if per_chain else integrator_from_record(record["integrator"]), np.asarray(ds["time"].values),
                 record["chunk_size"], RunControls(record["exit_margin"], record["max_steps"], record["peak_rtol"]),
                 np.asarray(ds["lag"].values) if "lag" in ds.coords else None,
-                chain_integrators={k: integrator_from_record(r) for k, r in per_chain.items()} if per_chain else None)
+                chain_integrators={k: integrator_from_record(r) for k, r in per_chain.items()} if per_chain else None,
+                # a record without windows is a run on the whole grid (every store before granchain 0.5)
+                pulse_window=AUTO if "pulse_window" in record else FULL,
+                pulse_ends=ends_of_record(record.get("pulse_window")))
     except (KeyError, TypeError, ValueError):
         return None

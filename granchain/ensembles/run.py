@@ -26,12 +26,15 @@ from ..families import ChainFamily, RandomDecorated
 from ..model.chain import HERTZ
 from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
 from ..solve.simulation import linear_crossing_time, time_limit
+from . import pulse_window as _window
+from .pulse_window import AUTO, FULL
 from .store import WALL, MemorySink, Variable, ZarrSink
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL",
            "DAMPED_RTOL", "DAMPED_ATOL", "ensemble_integrator"]
 
-#: Ensemble defaults: the relaxed zone behind the pulse (:meth:`DP5.relaxed`), with the
+#: Ensemble defaults: the relaxed zone behind the pulse and the trailing window (:meth:`DP5.windowed`;
+#: :meth:`DP5.relaxed`, every granule to the end, with ``pulse_window="full"``), with the
 #: Runge-Kutta-Nystrom pair :class:`RKN4` at ENSEMBLE_RTOL / ENSEMBLE_ATOL for decorated chains and DP5
 #: at SMOOTH_RTOL / SMOOTH_ATOL for their effective chains; DP5 at RANDOM_RTOL / RANDOM_ATOL without the
 #: relaxed zone for every other chain kind (polydisperse, binary, a user's).
@@ -62,18 +65,25 @@ DAMPED_RTOL = 1e-6
 DAMPED_ATOL = 1e-9
 
 
-def ensemble_integrator(chain: str = "decorated", *, conservative: bool = True) -> Integrator:
-    """The ensembles' default integrator for a chain kind: ``RKN4.relaxed()`` at
-    :data:`ENSEMBLE_RTOL`, :data:`ENSEMBLE_ATOL` for "decorated" chains, :meth:`DP5.relaxed` at
+def ensemble_integrator(chain: str = "decorated", *, conservative: bool = True, windowed: bool = True) -> Integrator:
+    """The ensembles' default integrator for a chain kind: ``RKN4.windowed()`` at
+    :data:`ENSEMBLE_RTOL`, :data:`ENSEMBLE_ATOL` for "decorated" chains, :meth:`DP5.windowed` at
     :data:`SMOOTH_RTOL`, :data:`SMOOTH_ATOL` for "effective" ones (their accuracy contract is in
     ``DP5``), and ``DP5`` at :data:`RANDOM_RTOL`, :data:`RANDOM_ATOL` without the relaxed zone for every
     other kind (see :data:`RANDOM_RTOL`). For a contact law that is not ``conservative`` (viscoelastic:
-    forces depend on velocities), decorated chains get :meth:`DP5.relaxed` at :data:`DAMPED_RTOL`,
-    :data:`DAMPED_ATOL`."""
+    forces depend on velocities), decorated chains get :meth:`DP5.windowed` at :data:`DAMPED_RTOL`,
+    :data:`DAMPED_ATOL`.
+
+    ``windowed``: the trailing window, with which a realisation costs linearly in the chain's length
+    (the ensembles give each observed granule its averaged-pulse window: ``run_ensemble(pulse_window=
+    "auto")``, :mod:`granchain.ensembles.pulse_window`); False: ``relaxed`` instead of ``windowed``,
+    every granule integrated to the end of the time grid (the wake behind the pulse included; the
+    defaults before granchain 0.5)."""
+    zone = (lambda cls: cls.windowed) if windowed else (lambda cls: cls.relaxed)
     if chain == "decorated":
-        return RKN4.relaxed(ENSEMBLE_RTOL, ENSEMBLE_ATOL) if conservative else DP5.relaxed(DAMPED_RTOL, DAMPED_ATOL)
+        return zone(RKN4)(ENSEMBLE_RTOL, ENSEMBLE_ATOL) if conservative else zone(DP5)(DAMPED_RTOL, DAMPED_ATOL)
     if chain == "effective":
-        return DP5.relaxed(SMOOTH_RTOL, SMOOTH_ATOL)
+        return zone(DP5)(SMOOTH_RTOL, SMOOTH_ATOL)
     return DP5(RANDOM_RTOL, RANDOM_ATOL)
 
 
@@ -110,6 +120,12 @@ class EnsembleSpec:
     #: {chain kind: Integrator}; filled from ``integrator`` (one for all kinds) or, without one, from
     #: each kind's :func:`ensemble_integrator`. Given explicitly, it wins over ``integrator``.
     chain_integrators: dict | None = None
+    #: "auto": each observed granule's averaged pulse in a window of its own, for the chain kinds whose
+    #: integrator runs a trailing window (the defaults; :mod:`granchain.ensembles.pulse_window`); "full":
+    #: the whole time grid (default integrators without the trailing window: the wake included).
+    pulse_window: str = "auto"
+    #: {chain kind: window ends (K,)} once set (``pulse_window.window_ends``, or a store's record); None before.
+    pulse_ends: dict | None = field(default=None, repr=False)
 
     def __post_init__(self):
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
@@ -124,6 +140,10 @@ class EnsembleSpec:
         if not chains or any(c not in known for c in chains) or len(set(chains)) != len(chains):
             raise ValueError(f"chains must be one or more of {list(known)} (or 'both'), got {self.chains!r}")
         set_("chains", tuple(c for c in known if c in chains))
+        if self.pulse_window not in (AUTO, FULL):
+            raise ValueError(f"pulse_window must be {AUTO!r} (each granule's averaged pulse in a window of its own, the "
+                             f"trailing window on: cost linear in N) or {FULL!r} (the whole time grid, the wake behind "
+                             f"the pulse included), got {self.pulse_window!r}")
         # One integrator for every chain kind when one is given; else each kind's default.
         if self.chain_integrators is not None:
             # A dict may name kinds the family has but this run does not compute (one dict for runs of
@@ -143,7 +163,8 @@ class EnsembleSpec:
         else:
             given = self.integrator
             conservative = self.family.contact_law.conservative
-            per_chain = {c: (get_integrator(given) if given is not None else ensemble_integrator(c, conservative=conservative))
+            per_chain = {c: (get_integrator(given) if given is not None
+                             else ensemble_integrator(c, conservative=conservative, windowed=self.pulse_window == AUTO))
                          for c in self.chains}
         law = self.family.contact_law
         for c, integ in per_chain.items():  # refused here, before a store exists
@@ -158,6 +179,7 @@ class EnsembleSpec:
         grid = np.array(grid)
         grid.setflags(write=False)
         set_("t_grid", grid)
+        set_("pulse_ends", self._checked_pulse_ends())
         set_("chunk_size", count("chunk_size", self.chunk_size, minimum=1))
         if not isinstance(self.controls, RunControls):
             raise ValueError(f"controls must be a granchain.RunControls, got {self.controls!r}")
@@ -168,6 +190,29 @@ class EnsembleSpec:
                                  "realisation's peak (e.g. numpy.arange(-10, 10.05, 0.1)), or None")
             lags.setflags(write=False)
             set_("lags", lags)
+
+    def _checked_pulse_ends(self) -> dict | None:
+        """The averaged-pulse windows as given (a dict per chain kind that gets one), or None where the run has
+        none (``pulse_window="full"``, or no integrator with a trailing window)."""
+        kinds = _window.applies(self) if self.pulse_window == AUTO else {}
+        if not kinds or self.pulse_ends is None:
+            return None
+        if set(self.pulse_ends) != set(kinds):
+            raise ValueError(f"pulse_ends must give the windows of the chain kinds {sorted(kinds)}, got {sorted(self.pulse_ends)}")
+        K = self.family.n_observed
+        ends = {}
+        for kind, e in self.pulse_ends.items():
+            e = np.array([np.inf if x is None else x for x in np.ravel(np.asarray(e, dtype=object))], dtype=float)
+            if np.any(np.isnan(e)) or e.size != K:
+                raise ValueError(f"the averaged-pulse window ends of the {kind} chains must be {K} times (inf: none), got {e!r}")
+            e.setflags(write=False)
+            ends[kind] = e
+        return ends
+
+    @property
+    def has_pulse_windows(self) -> bool:
+        """True when some chain kind of this run gets averaged-pulse windows (set or still to set)."""
+        return self.pulse_window == AUTO and bool(_window.applies(self))
 
     def _other_integrators(self) -> dict:
         """``{"chain_integrators": {kind: record}}`` when the chain kinds are not all integrated by
@@ -205,6 +250,8 @@ class EnsembleSpec:
             "max_steps": self.controls.max_steps,
             "results_version": RESULTS_VERSION,  # not the package version: an upgrade that computes the same numbers resumes
         }
+        if self.has_pulse_windows:  # only then: a run without windows keeps the record of earlier versions
+            record["pulse_window"] = _window.record(self)
         if self.lags is not None:  # only then: stores without the aligned pulse keep their 0.1/0.2 record
             record["lags"] = {"start": float(self.lags[0]), "stop": float(self.lags[-1]), "size": int(self.lags.size),
                               "checksum": float(np.sum(self.lags * np.arange(1, self.lags.size + 1)))}
@@ -355,6 +402,7 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
             np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),
             t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale,
             out={**{k: a[ci] for k, a in buffers.items()}, "lags": spec.lags}, model=family.model(),
+            pulse_end=_window.keep_until(spec.pulse_ends[name]) if spec.pulse_ends and name in spec.pulse_ends else None,
         )
     out = {"chunk": j, "realizations": idx.size, **params}
     stored = {v.name for v in result_variables(family)}
@@ -400,15 +448,17 @@ def _family_of(family, distribution, n, momentum_conserving) -> ChainFamily:
                      f"or a number N of large granules, got {family!r}")
 
 
-def _integrator_of(integrator, rtol, atol) -> Integrator | None:
+def _integrator_of(integrator, rtol, atol, windowed: bool = True) -> Integrator | None:
     """The spec's ``integrator``: None (each chain kind's default), one integrator, or a dict
-    {chain kind: integrator} (returned as it is: EnsembleSpec's ``chain_integrators``)."""
+    {chain kind: integrator} (returned as it is: EnsembleSpec's ``chain_integrators``); ``rtol``/``atol``
+    alone set DP5's, with the trailing window if ``windowed`` (else the relaxed zone only)."""
     if isinstance(integrator, dict) and rtol is None and atol is None:
         return integrator
     if integrator is None:
         if rtol is None and atol is None:
             return None  # each chain kind's default (ensemble_integrator)
-        return DP5.relaxed(rtol, atol)  # the one not given: DP5's goal tolerance (1e-6 or 1e-9)
+        # the one not given: DP5's goal tolerance (1e-6 or 1e-9)
+        return DP5.windowed(rtol, atol) if windowed else DP5.relaxed(rtol, atol)
     if rtol is not None or atol is not None:
         raise ValueError("rtol/atol set the default DP5; with integrator= set them on the integrator, e.g. DP5(rtol=1e-7)")
     return get_integrator(integrator)
@@ -418,7 +468,8 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
                  integrator=None, n: float = HERTZ, rtol: float | None = None, atol: float | None = None, t_grid=None,
                  chunk_size: int = 500, out=None, resume: bool = True, client=None, progress: bool = True,
                  momentum_conserving: bool = False, exit_margin: float = 3.0, peak_rtol: float = 1e-6,
-                 max_steps: int = 20_000_000, threads: int | None = None, n_large: int | None = None, lags=None):
+                 max_steps: int = 20_000_000, threads: int | None = None, n_large: int | None = None, lags=None,
+                 pulse_window: str | None = None):
     """Integrate ``realizations`` random chains of a family, with any registered integrator.
 
     Parameters
@@ -442,10 +493,13 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         naming one for each of ``chains`` (it may also name other kinds of the family, which this
         run does not use, so one dict serves runs of either chain; a kind the family does not have,
         or a computed kind without an integrator, is refused). Default: :func:`ensemble_integrator`
-        of each kind (``RKN4.relaxed`` at :data:`ENSEMBLE_RTOL` for decorated chains, ``DP5.relaxed``
-        at :data:`SMOOTH_RTOL` for effective ones, ``DP5`` at :data:`RANDOM_RTOL` for the others), or ``DP5.relaxed(rtol, atol)`` for all if
-        ``rtol``/``atol`` are given (the other one then 1e-6 or 1e-9). ``granchain.DP5(1e-6, 1e-9)`` is the exact (untruncated) integration of earlier
-        versions. DOP853 runs realisation by realisation in Python (slow).
+        of each kind (``RKN4.windowed`` at :data:`ENSEMBLE_RTOL` for decorated chains, ``DP5.windowed``
+        at :data:`SMOOTH_RTOL` for effective ones, ``relaxed`` instead of ``windowed`` with
+        ``pulse_window="full"``; ``DP5`` at :data:`RANDOM_RTOL` for the others), or
+        ``DP5.windowed(rtol, atol)`` (``DP5.relaxed`` with ``pulse_window="full"``) for all if
+        ``rtol``/``atol`` are given (the other one then 1e-6 or 1e-9). ``granchain.DP5(1e-6, 1e-9)`` is
+        the exact (untruncated) integration of earlier versions. DOP853 runs realisation by
+        realisation in Python (slow).
     t_grid : array, optional
         Times of the averaged pulse <v_k(t)> (default: the family's ``default_time_grid()``).
     chunk_size : int
@@ -471,6 +525,17 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         to each realisation's own peak time at k; variables ``aligned_velocity``,
         ``aligned_velocity_stderr`` with dim ``lag``; see :mod:`granchain.paper.dephasing`).
         Default None: not accumulated (the store is then exactly as without this option).
+    pulse_window : {"auto", "full"}, optional
+        Default: "auto", or, when ``out`` is an existing store, the setting it was started with ("full"
+        for a store written before granchain 0.5). "auto": the averaged pulse <v_k(t)> of each observed granule k is recorded in a window
+        of its own, [0, t_end[k]], that holds the pulse of every realisation (set from the arrival times
+        of realisations 0..63: :mod:`granchain.ensembles.pulse_window`; the store's ``pulse_window_end``;
+        NaN after it). Every granule stays integrated through its window, so the recorded <v_k(t)> is
+        exact there, and the default integrators run the trailing window (``windowed``): a realisation
+        costs linearly in the chain's length instead of quadratically. "full": the whole time grid for
+        every granule, the wake long after the pulse included (default integrators ``relaxed``, every
+        granule integrated to the end: the defaults before granchain 0.5). With an integrator given
+        that has no trailing window the two are the same.
 
     Ctrl-C raises :class:`EnsembleInterrupted` (a KeyboardInterrupt) whose message says where the
     finished chunks are saved.
@@ -483,14 +548,19 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     if n_large is not None:
         family = n_large
     fam = _family_of(family, distribution, n, momentum_conserving)
-    integ = _integrator_of(integrator, rtol, atol)
+    if pulse_window is None:  # a store is continued as it was started; a new run gets the windows
+        pulse_window = _window.stored_setting(out) if out is not None and resume is True else AUTO
+    integ = _integrator_of(integrator, rtol, atol, windowed=pulse_window == AUTO)
     per_chain = integ if isinstance(integ, dict) else None
     spec = EnsembleSpec(fam, realizations, seed, chains, None if per_chain else integ, t_grid, chunk_size,
-                        RunControls(exit_margin, max_steps, peak_rtol), lags, chain_integrators=per_chain)
+                        RunControls(exit_margin, max_steps, peak_rtol), lags, chain_integrators=per_chain,
+                        pulse_window=pulse_window)
     threads = _threads(threads)
     if not isinstance(resume, (bool, np.bool_)):
         raise ValueError(f"resume must be True or False, got {resume!r}")
     report = _Progress(spec, progress)
+    if spec.has_pulse_windows and spec.pulse_ends is None:
+        spec = _with_pulse_windows(spec, out if resume else None, threads, report)
     sink = MemorySink(spec) if out is None else ZarrSink(spec, out, bool(resume), log=report.message)
     futures = []
     try:
@@ -523,6 +593,21 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     finally:
         if out is not None:
             sink.close()
+
+
+def _with_pulse_windows(spec: EnsembleSpec, out, threads, report) -> EnsembleSpec:
+    """``spec`` with its averaged-pulse windows set: those of the store ``out`` when it was started with
+    windows (a store is continued with its own), else from the pilot realisations
+    (:func:`granchain.ensembles.pulse_window.window_ends`)."""
+    import dataclasses
+
+    record = _window.stored_record(out) if out is not None else None
+    ends = _window.ends_of_record(record.get("pulse_window")) if record is not None else None
+    if ends is None:
+        report.message(f"setting each granule's averaged-pulse window from the arrival times of realisations "
+                       f"0..{_window.PILOT_REALIZATIONS - 1}")
+        ends = _window.window_ends(spec, lambda pilot: compute_chunk(pilot, 0, threads=threads))
+    return dataclasses.replace(spec, pulse_ends=ends)
 
 
 class EnsembleInterrupted(KeyboardInterrupt):

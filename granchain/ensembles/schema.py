@@ -24,7 +24,7 @@ import numpy as np
 from .._status import NOT_COMPUTED, Status
 from ..units import RESCALED, rescaled_attrs
 
-__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "DISSIPATION", "AVERAGED", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "PROGRESS_SUMS",
+__all__ = ["Variable", "RESULTS", "FORCES", "WALL", "DISSIPATION", "AVERAGED", "WINDOW", "ALIGNED", "PROGRESS", "PROGRESS_ALIGNED", "PROGRESS_SUMS",
            "result_variables", "per_realisation_variables", "progress_sums", "progress_sum_variables", "chunk_variables",
            "averaged_variables", "progress_variables", "parameter_variables", "sizes", "checked_variables", "digest"]
 
@@ -116,6 +116,18 @@ AVERAGED = (
     Variable("n_valid", ("chain",), "int64", 0, "1", "successful realisations in mean_velocity"),
 )
 
+#: The averaged pulse's window at each observed granule (only in ensembles whose integrator runs a trailing
+#: window, with ``pulse_window="auto"``: :mod:`granchain.ensembles.pulse_window`). ``mean_velocity`` is
+#: recorded for t <= pulse_window_end and NaN (not computed) after it.
+WINDOW = (
+    Variable("pulse_window_end", ("chain", "granule"), "float64", np.inf, UNITS_T,
+             "end of the averaged pulse's window at large granule k: <v_k(t)> recorded for t <= it (inf: whole grid)",
+             {"comment": "granule k stays integrated in every realisation until this time (the trailing window waits "
+                         "for it); set from the ensemble's first realisations (granchain.ensembles.pulse_window)"}),
+    Variable("pulse_window_lag", ("chain",), "int64", 0, "1",
+             "lag of the trailing window in observed granules (0: none)"),
+)
+
 #: The aligned pulse (only in ensembles run with ``lags``): <v_k(t_k^peak + tau)> over successful
 #: realisations, each shifted by its own peak time at k (granchain.backends.kernels.aligned).
 ALIGNED = (
@@ -174,8 +186,9 @@ def chunk_variables(spec) -> tuple:
 
 
 def averaged_variables(spec) -> tuple:
-    """The averaged variables of a run: :data:`AVERAGED`, plus :data:`ALIGNED` when it has ``lags``."""
-    return AVERAGED + (ALIGNED if spec.lags is not None else ())
+    """The averaged variables of a run: :data:`AVERAGED`, plus :data:`ALIGNED` when it has ``lags`` and
+    :data:`WINDOW` when it has averaged-pulse windows (written with them, once every chunk is done)."""
+    return AVERAGED + (ALIGNED if spec.lags is not None else ()) + (WINDOW if spec.pulse_ends else ())
 
 
 def progress_variables(spec) -> tuple:

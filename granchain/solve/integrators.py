@@ -117,7 +117,8 @@ class Integrator:
                                                    stop_at_exit=stop_at_exit, controls=controls, sensed=sensed)
 
     def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls: RunControls, scale: float, out: dict, model: dict | None = None) -> None:
+                        controls: RunControls, scale: float, out: dict, model: dict | None = None,
+                        pulse_end=None) -> None:
         """Integrate a batch of chains (rows of ``masses`` (R, M), ``stiffness`` (R, M-1),
         ``initial_velocity`` (R,), shared ``observed`` and recorded ``contacts``, 0-based),
         stopping at the pulse's exit (or its return from a wall), on this integrator's backend.
@@ -134,13 +135,16 @@ class Integrator:
         arrays, as keywords of :class:`granchain.Chain` (``contact``, ``static_force``, ``striker``;
         None: the paper's elastic, unloaded chain struck on granule 1). ``t_max``: one time limit for all
         rows, or one per row (R,). A precompressed batch runs to it (its contacts never open), the others
-        stop at the pulse's exit.
+        stop at the pulse's exit. ``pulse_end`` (K,; None: never): per observed granule the end of its
+        averaged-pulse window (``granchain.ensembles.pulse_window``): a trailing window does not drop the
+        granule before that time, and its grid velocities after it are not recorded (they enter the sums
+        as 0, and the store shows them as not computed).
         """
         from ..backends import get_backend
 
         get_backend(self.backend).integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts,
                                                   t_grid=t_grid, t_max=t_max, controls=controls, scale=scale, out=out,
-                                                  model=model)
+                                                  model=model, pulse_end=pulse_end)
 
 
 @dataclass(frozen=True)

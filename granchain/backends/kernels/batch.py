@@ -94,7 +94,7 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     """Integrate realisations r = 0..R-1 (rows of ``batch``, ``records.Batch``: each struck at granule 1
     with its ``initial_velocity``) with ``method`` by the single-chain entry point ``kernel``
     (``dispatch.chain_kernel``: one compiled specialisation of this kernel per entry point used), recording what ``run`` asks (its
-    ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``; the run stops at the
+    ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``, ``pulse_end``; the run stops at the
     pulse's exit with ``run.stop_at_exit``, else, successfully, at the row's ``batch.t_max[r]`` (also its
     limit otherwise; ``run.t_max`` is not read): a precompressed chain,
     whose contacts never open).
@@ -118,8 +118,8 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     wall = params.wall
     obs, t_grid = run.observed, run.t_grid
     # (read here: the parallel loop gets the fields, not the record; see params above)
-    stop_at_exit, exit_margin, max_steps, peak_rtol, sensed = (run.stop_at_exit, run.exit_margin, run.max_steps,
-                                                               run.peak_rtol, run.contacts)
+    stop_at_exit, exit_margin, max_steps, peak_rtol, sensed, pulse_end = (run.stop_at_exit, run.exit_margin, run.max_steps,
+                                                                          run.peak_rtol, run.contacts, run.pulse_end)
     contacts, scale, lags = tally
     peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end, dissipated = rows
     sum_v, sum_v2, sum_wall, n_valid, sum_a, sum_a2 = sums
@@ -142,7 +142,7 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
         grid_f = np.zeros(T)
         info = np.zeros(INFO_SIZE)
         grid_c = np.zeros((T, sensed.shape[0]))
-        row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed)
+        row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed, pulse_end)
         st = kernel(method, Model(m, c, params), row_run, State(x, v),
                              Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
         gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])

@@ -47,9 +47,13 @@ Steps = namedtuple("Steps", ["rtol", "atol", "first_step", "fixed_step", "relaxe
 #: on which their velocities are sampled, the hard limit ``t_max``, whether to stop
 #: ``exit_margin`` after the pulse has left (``stop_at_exit``), the step budget ``max_steps``, the
 #: tie rule of peaks ``peak_rtol`` (``peaks.is_new_peak``) and the ``contacts`` (int64, (S,), 0-based)
-#: whose force is recorded on the grid (a sensor granule's two contacts; empty: none).
+#: whose force is recorded on the grid (a sensor granule's two contacts; empty: none), and per observed
+#: granule the end of its averaged-pulse window ``pulse_end`` (K,): the trailing window keeps the granule
+#: integrated until that time (inf: to the end), and its grid velocities after it are not recorded (written
+#: as 0; the ensembles' readers show them as not computed). Empty (simulate, and ensembles without
+#: windows): no window, the trailing window drops granules as the front alone decides.
 Run = namedtuple("Run", ["observed", "t_grid", "t_max", "stop_at_exit", "exit_margin", "max_steps", "peak_rtol",
-                         "contacts"])
+                         "contacts", "pulse_end"])
 
 #: The state (x, v) of the M granules: the initial state on entry, the final one on return.
 State = namedtuple("State", ["x", "v"])

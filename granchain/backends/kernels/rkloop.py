@@ -178,7 +178,7 @@ def rk_integrate(method, general, steps, model, run, state, out):
     # our caller, the scratch arrays above by the keep_alive call after the loop.
     bmodel = Model(borrowed(m), borrowed(cp), model.params)
     brun = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin,
-               run.max_steps, run.peak_rtol, borrowed(run.contacts))
+               run.max_steps, run.peak_rtol, borrowed(run.contacts), borrowed(run.pulse_end))
     bstate = State(borrowed(xp), borrowed(vp))
     bout = Outputs(borrowed(out.peak_v), borrowed(out.peak_t), borrowed(out.grid_v), borrowed(out.peak_f),
                    borrowed(out.peak_ft), borrowed(out.grid_f), borrowed(out.info), borrowed(out.grid_c))
@@ -214,7 +214,7 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
     inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd = scratch
     m, c, p = model.masses, model.stiffness, model.params
     x, v = state
-    obs, t_grid = run.observed, run.t_grid
+    obs, t_grid, pulse_end = run.observed, run.t_grid, run.pulse_end
     peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
     peak_rtol = run.peak_rtol
     h_fixed, relax_lag, window_lag = steps.fixed_step, steps.relaxed_lag, steps.window_lag
@@ -246,6 +246,10 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
     q_hi = 0
     while q_hi < n_obs and obs[q_hi] < hi:
         q_hi += 1
+    # Observed granules whose averaged-pulse window has closed: obs[0..q_open-1] (run.pulse_end; only
+    # moves forward). The trailing window never cuts ahead of obs[q_open].
+    q_open = 0
+    windows = pulse_end.shape[0] > 0
     relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
     frozen_potential = 0.0
     dissipated = 0.0
@@ -378,7 +382,9 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
                 weights(method, theta, Q, QV)
                 for q in range(n_obs):
                     k = obs[q] - lo
-                    if k < 0:  # behind the window: the velocity it left with
+                    if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
+                        grid_v[g, q] = 0.0
+                    elif k < 0:  # behind the window: the velocity it left with
                         grid_v[g, q] = v[obs[q]]
                     else:
                         grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
@@ -415,7 +421,14 @@ def _rk_loop(method, general, steps, model, run, state, out, scratch):
             cut = False
             if goal and front >= 0:
                 if window_lag > 0 and front >= window_lag:
-                    new_lo = open_contact_behind(X, C, p, lo, obs[front - window_lag])
+                    # Behind the front's lag, and not past a granule whose averaged-pulse window is
+                    # still open (its grid velocities up to run.pulse_end are recorded exactly).
+                    target = front - window_lag
+                    if windows:
+                        while q_open < n_obs and pulse_end[q_open] < t:
+                            q_open += 1
+                        target = min(target, q_open)
+                    new_lo = open_contact_behind(X, C, p, lo, obs[target])
                     if new_lo > lo:
                         # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
                         # contacts among them (the contact at the new edge is open), their exit time.
