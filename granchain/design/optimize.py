@@ -71,9 +71,19 @@ class _Progress:
             extra = f" ({replayed} already evaluated: looked up)" if replayed else ""
             print(f"{self.done}/{self.total} evaluations{extra}, best {best:.6g}, {rate:.1f}/s", file=sys.stderr, flush=True)
 
-    def close(self) -> None:
+    def close(self, best: float | None = None) -> None:
+        """End the report. A run may stop below its budget (differential evolution's generations and the
+        refinement do not divide it exactly): the bar is then closed at the evaluations done, and the
+        line report prints its last line, so that neither is left at a stale count."""
         if self.bar is not None:
+            if self.done < self.total:
+                self.bar.total = self.done
+                self.bar.refresh()
             self.bar.close()
+        elif self.enabled and self.done and self.done < self.total:
+            rate = self.done / max(time.monotonic() - self.t0, 1e-9)
+            tail = "" if best is None else f", best {best:.6g}"
+            print(f"{self.done} evaluations (of a budget of {self.total}) done{tail}, {rate:.1f}/s", file=sys.stderr, flush=True)
 
 
 def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int = 10, local: str | None = "powell",
@@ -113,7 +123,6 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
     progress : bool
         A progress bar (one line per generation when stderr is not a terminal).
     """
-    from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
 
     evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client)
     objective = evaluator.objective
@@ -140,9 +149,33 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
     from os import fspath, makedirs
     from os import path as osp
 
-    history = History(space.names, record, None if out is None else osp.join(fspath(out), "history.zarr"), resume)
+    lock = None
     if out is not None:
         makedirs(fspath(out), exist_ok=True)
+        # One run at a time per directory (a run started again while the interrupted one is still ending,
+        # or twice): the ensembles' store lock, on the history (a ValueError naming the holder's PID).
+        from ..ensembles.lock import StoreLock
+
+        lock = StoreLock(osp.join(fspath(out), "history.zarr"))
+        lock.acquire()
+    try:
+        return _run(space, objective, evaluator, record, budget=budget, seed=seed, popsize=popsize, local=local,
+                    maxiter=maxiter, snap_budget=snap_budget, out=out, resume=resume, progress=progress, mutation=mutation,
+                    recombination=recombination)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _run(space, objective, evaluator, record, *, budget, seed, popsize, local, maxiter, snap_budget, out, resume, progress,
+         mutation, recombination) -> DesignResult:
+    """The search itself (``optimize`` checked the arguments and holds the run directory's lock)."""
+    from os import fspath
+    from os import path as osp
+
+    from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
+
+    history = History(space.names, record, None if out is None else osp.join(fspath(out), "history.zarr"), resume)
     bar = _Progress(budget, progress, f"design {space.kind}")
     best = [np.inf]
 
@@ -196,7 +229,7 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
             message += _snap_to_bounds(space, history, objective, budget - history.count, evaluate)
     finally:
         history.flush()
-        bar.close()
+        bar.close(objective.sense * best[0] if np.isfinite(best[0]) else None)
     result = DesignResult.from_history(space, objective, evaluator, history, seed=seed, budget=budget, message=message,
                                        version=__version__)
     if out is not None:
