@@ -351,3 +351,19 @@ def test_cli_max_radius_constraint(tmp_path):
                  "--quiet", "--no-figure"]) == 0
     data = json.loads((out / "result.json").read_text())
     assert max(data["best_radii"]) <= 1.2 + 1e-12 and data["space"]["constraints"] == {"max_radius": 1.2}
+
+
+def test_workers_map_gives_the_same_run():
+    """workers: a map-like callable as SciPy takes it (here a thread pool's map; a spawn process pool or a
+    Dask client's map are used alike): each generation is split into batches and mapped, and the run is
+    the one of a single batch."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    space = design.TaperedSpace(8, (0.0, 0.2))
+    a = design.optimize(space, "wall-force", budget=40, seed=0)
+    with ThreadPoolExecutor(2) as pool:
+        b = design.optimize(space, "wall-force", budget=40, seed=0, workers=pool.map)
+    assert a.value == b.value and a.params == b.params
+    assert np.array_equal(a.history["value"].values, b.history["value"].values, equal_nan=True)
+    with pytest.raises(ValueError, match="map-like callable"):
+        design.BatchEvaluator(space, "wall-force", workers=4)

@@ -87,7 +87,7 @@ class _Progress:
 
 
 def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int = 10, local: str | None = "powell",
-             statistic="mean", integrator=None, out=None, resume: bool = True, client=None, progress: bool = False,
+             statistic="mean", integrator=None, out=None, resume: bool = True, client=None, workers=None, progress: bool = False,
              mutation=(0.5, 1.0), recombination: float = 0.7) -> DesignResult:
     """The best design of ``space`` for ``objective`` within ``budget`` evaluations.
 
@@ -120,11 +120,18 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
         Continue the run saved in ``out`` (default); False: an existing run there is an error.
     client : dask.distributed.Client, optional
         Evaluate each generation on this cluster (one batch per worker).
+    workers : callable, optional
+        A map-like callable, as SciPy's ``differential_evolution(workers=...)`` takes it
+        (``multiprocessing.Pool(k).map``, ``concurrent.futures.Executor.map``, ``client.map`` of a Dask
+        client), or a Dask client: each generation is split into one batch per core and the batches are
+        mapped. The values, and so the run, do not depend on it. A process pool must start its
+        processes by "spawn" or "forkserver" (``multiprocessing.get_context("spawn").Pool(2)``): the
+        compiled kernels run on GNU OpenMP threads, which a forked process cannot use.
     progress : bool
         A progress bar (one line per generation when stderr is not a terminal).
     """
 
-    evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client)
+    evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client, workers=workers)
     objective = evaluator.objective
     popsize = count("popsize", popsize, minimum=2)
     seed = count("seed", seed, minimum=0)
