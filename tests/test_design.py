@@ -311,3 +311,59 @@ def test_dask_client_gives_the_same_result():
         a = design.optimize(space, "wall-force", budget=40, seed=0, client=client)
     b = design.optimize(space, "wall-force", budget=40, seed=0)
     assert a.value == b.value and a.params == b.params
+
+
+def test_a_run_directory_takes_one_run_at_a_time(tmp_path):
+    """A second run into a directory whose run is still going (here: its lock held) is refused with a
+    message naming the holder; once released, the directory runs (and resumes) as before."""
+    from granchain.ensembles.lock import StoreLock
+
+    space = design.TaperedSpace(6, (0.0, 0.2))
+    lock = StoreLock(tmp_path / "run" / "history.zarr")
+    (tmp_path / "run").mkdir()
+    lock.acquire()
+    try:
+        with pytest.raises(ValueError, match="being written by PID"):
+            design.optimize(space, "wall-force", budget=30, seed=0, out=tmp_path / "run")
+    finally:
+        lock.release()
+    res = design.optimize(space, "wall-force", budget=30, seed=0, out=tmp_path / "run")
+    assert res.n_evaluations <= 30 and (tmp_path / "run" / "result.json").exists()
+
+
+def test_line_progress_ends_with_the_evaluations_done(capsys):
+    """Without a terminal the progress is one line every 2 s; a run that stops below its budget (the
+    generations do not divide it) still ends with a line of what was done, not a stale count."""
+    res = design.optimize(design.TaperedSpace(6, (0.0, 0.2)), "wall-force", budget=30, seed=0, progress=True)
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    if res.n_evaluations < 30:
+        assert last.startswith(f"{res.n_evaluations} evaluations (of a budget of 30) done")
+    else:
+        assert last.startswith("30/30 evaluations")
+
+
+def test_cli_max_radius_constraint(tmp_path):
+    """--max-radius bounds every radius: a growing taper (q < 0) whose radii would pass 1.2 is infeasible."""
+    from granchain.cli import main
+
+    out = tmp_path / "grow"
+    assert main(["design", "--q=-0.1,0.05", "--size", "6", "--budget", "30", "--max-radius", "1.2", "--out", str(out),
+                 "--quiet", "--no-figure"]) == 0
+    data = json.loads((out / "result.json").read_text())
+    assert max(data["best_radii"]) <= 1.2 + 1e-12 and data["space"]["constraints"] == {"max_radius": 1.2}
+
+
+def test_workers_map_gives_the_same_run():
+    """workers: a map-like callable as SciPy takes it (here a thread pool's map; a spawn process pool or a
+    Dask client's map are used alike): each generation is split into batches and mapped, and the run is
+    the one of a single batch."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    space = design.TaperedSpace(8, (0.0, 0.2))
+    a = design.optimize(space, "wall-force", budget=40, seed=0)
+    with ThreadPoolExecutor(2) as pool:
+        b = design.optimize(space, "wall-force", budget=40, seed=0, workers=pool.map)
+    assert a.value == b.value and a.params == b.params
+    assert np.array_equal(a.history["value"].values, b.history["value"].values, equal_nan=True)
+    with pytest.raises(ValueError, match="map-like callable"):
+        design.BatchEvaluator(space, "wall-force", workers=4)

@@ -7,7 +7,7 @@ A steel bead of radius 5 mm strikes, at 1 m/s, a column of 20 steel beads standi
 transmits the smallest peak force to the wall? ``compute()`` runs the design (SciPy's differential
 evolution and a Powell refinement over batches of the compiled kernel) and returns the result;
 ``plot(result)`` draws its convergence and the best design's wall force against a monodisperse
-chain of the same size and one of the same mass, in newtons and microseconds. The script checks its
+chain of the same number of beads and one of the same length and mass, in newtons and microseconds. The script checks its
 picture before saving it: every axis labelled with its unit, a legend on every panel.
 """
 

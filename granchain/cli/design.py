@@ -69,6 +69,8 @@ def add_parser(subparsers) -> None:
     c.add_argument("--max-mass", dest="max_mass", type=float, help="the granules' total mass at most this (granule 1 has mass 1)")
     c.add_argument("--max-length", dest="max_length", type=float, help="the chain's length (sum of diameters) at most this")
     c.add_argument("--min-radius", dest="min_radius", type=float, help="every radius at least this")
+    c.add_argument("--max-radius", dest="max_radius", type=float,
+                   help="every radius at most this (granule 1, the struck one, has radius 1)")
     c.add_argument("--free-end", dest="free_end", action="store_true",
                    help="judge transmitted-momentum or arrival-time at a free far end instead of a wall")
     p.add_argument("--no-figure", dest="figure", action="store_false", help="do not draw OUT/design.png")
@@ -89,7 +91,7 @@ def build_space(args):
     wall = OBJECTIVE_ENDS[args.objective] == "wall" and not args.free_end
     if args.free_end and args.objective in ("wall-force", "impulse-duration"):
         raise ValueError(f"--objective {args.objective} is judged at a wall: drop --free-end")
-    constraints = Constraints(args.max_mass, args.max_length, args.min_radius)
+    constraints = Constraints(args.max_mass, args.max_length, args.min_radius, args.max_radius)
     if args.space != "binary" and args.materials:
         raise ValueError("--materials is for --space binary (species of two materials)")
     if args.space == "tapered":

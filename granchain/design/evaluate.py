@@ -7,8 +7,10 @@ parallel over rows in Numba threads); the objective reads the per-row outputs. N
 :func:`granchain.simulate` per design, except for the objectives that need one row's wall-force
 history (``Objective.route == "history"``, see :mod:`granchain.design.objectives`).
 
-A Dask ``client`` splits a generation into one batch per worker (``client.map``); the values do
-not depend on the split (rows are independent).
+A Dask ``client`` splits a generation into one batch per worker (``client.map``); ``workers``, a
+map-like callable as SciPy's optimisers take it (``multiprocessing.Pool(k).map``,
+``concurrent.futures.Executor.map``, or a Dask client's ``map`` whose futures are gathered), splits
+it into one batch per part. The values do not depend on the split (rows are independent).
 """
 
 from __future__ import annotations
@@ -130,9 +132,21 @@ class BatchEvaluator:
 
     ``integrator``: default the ensembles' for the space's chain kind
     (:func:`granchain.ensemble_integrator`); ``statistic``: "mean" or a quantile, for random spaces;
-    ``client``: a ``dask.distributed.Client`` (one batch per worker)."""
+    ``client``: a ``dask.distributed.Client`` (one batch per worker); ``workers``: a map-like callable
+    ``workers(func, parts)`` (or a Dask client), ``parts`` the generation split into ``parts`` batches
+    (default: as many as this machine has cores)."""
 
-    def __init__(self, space, objective, *, integrator=None, statistic="mean", client=None):
+    def __init__(self, space, objective, *, integrator=None, statistic="mean", client=None, workers=None,
+                 parts: int | None = None):
+        if workers is not None and hasattr(workers, "scheduler_info") and hasattr(workers, "gather"):
+            client, workers = (workers if client is None else client), None  # a Dask client given as workers
+        if workers is not None and not callable(workers):
+            raise ValueError(f"workers must be a map-like callable, workers(func, iterable) (e.g. multiprocessing.Pool(2).map, "
+                             f"an Executor's map or a Dask client's map), or a Dask client; got {workers!r}")
+        if client is not None and workers is not None:
+            raise ValueError("give either client (a Dask client) or workers (a map-like callable), not both")
+        self.workers = workers
+        self.parts = parts
         self.space = space
         self.objective = get_objective(objective)
         self.objective.check(space.wall)
@@ -145,6 +159,16 @@ class BatchEvaluator:
 
     def __call__(self, X) -> Evaluation:
         X = self.space.as_array(X)
+        if self.workers is not None and X.shape[0] >= 2:
+            import os
+            from functools import partial
+
+            k = min(self.parts or os.cpu_count() or 2, X.shape[0])
+            parts = [p for p in np.array_split(X, k) if p.size]
+            results = list(self.workers(partial(_evaluate, self.space, self.objective, self.integrator, self.statistic), parts))
+            if results and not isinstance(results[0], Evaluation) and hasattr(results[0], "result"):
+                results = [r.result() for r in results]  # futures (a Dask client's map)
+            return Evaluation(*(np.concatenate([getattr(r, f) for r in results]) for f in ("value", "stderr", "failed")))
         if self.client is None or X.shape[0] < 2:
             return _evaluate(self.space, self.objective, self.integrator, self.statistic, X)
         workers = max(1, len(self.client.scheduler_info().get("workers", {})))

@@ -1,5 +1,6 @@
 """The figure of a design run: (a) convergence, (b) the best design's wall force against monodisperse chains
-(one of the same size, one of the same mass behind the same struck granule).
+(one of the same number of granules, the run's reference; one of the same length and the same mass behind
+the same struck granule, :func:`length_and_mass_chain`).
 
 ``compute(result)`` returns the data (re-running the best chain and the references with
 :func:`granchain.simulate`), ``plot(result)`` draws it; with a :class:`granchain.units.Scale` the axes
@@ -13,26 +14,36 @@ import numpy as np
 from ..model.chain import from_radii
 from ..solve.simulation import simulate
 
-__all__ = ["compute", "plot"]
+__all__ = ["compute", "length_and_mass_chain", "plot"]
 
 
-def _equal_mass_chain(result):
-    """The same impact on a monodisperse protector of the same mass: granule 1 as in every design (radius
-    1, struck with velocity 1), then M - 1 equal spheres whose total mass is that of the best design's
-    granules 2..M (one material: radius (sum_{k>=2} R_k^3 / (M - 1))^(1/3)). Comparing with a chain
-    whose *every* granule is lighter would also lower the input energy m_1 v_1^2 / 2."""
+def length_and_mass_chain(result):
+    """The same impact on a monodisperse protector of the same length and the same mass as the best design.
+
+    Granule 1 is the struck granule of every design (radius 1, struck with velocity 1: the same input
+    energy); behind it come K equal spheres of granule 1's material whose total mass is that of the
+    best design's granules 2..M and whose total length (sum of diameters) is that of granules 2..M as
+    nearly as a whole number of spheres allows: K r = L and K r^3 = m give r = sqrt(m / L), K the
+    nearest integer to L / r, then r = (m / K)^(1/3) so that the mass is exact. Returns (chain, K, r,
+    relative length mismatch). Comparing with a chain whose *every* granule is lighter would also lower
+    the input energy m_1 v_1^2 / 2, so granule 1 is kept."""
     m = (result.chain.masses[:-1] if result.chain.wall else result.chain.masses)[1:]
-    radius = float((m.sum() / m.size) ** (1.0 / 3.0))
-    radii = np.concatenate(([1.0], np.full(m.size, radius)))
-    return from_radii(radii, n=result.chain.n, kind="monodisperse", wall=result.chain.wall), radius
+    half = np.asarray(result.best_radii, dtype=float)[1:]
+    mass, length = float(m.sum()), float(half.sum())  # length: sum of radii (half the sum of diameters)
+    k = max(1, int(round(length / np.sqrt(mass / length))))
+    radius = (mass / k) ** (1.0 / 3.0)
+    radii = np.concatenate(([1.0], np.full(k, radius)))
+    chain = from_radii(radii, n=result.chain.n, kind="monodisperse", wall=result.chain.wall)
+    return chain, k, radius, k * radius / length - 1.0
 
 
 def compute(result, dt: float = 0.02) -> dict:
     """Data of :func:`plot`: the history's values, and the force on the wall (for a chain with a wall;
     else the last granule's velocity) of the best chain and of the two monodisperse references."""
-    equal_mass, radius = _equal_mass_chain(result)
-    chains = {"best design": result.chain, "monodisperse, radius 1": result.reference_chain,
-              f"granule 1 + monodisperse, same mass (radius {radius:.3g})": equal_mass}
+    same, k, radius, mismatch = length_and_mass_chain(result)
+    size = result.reference_chain.size - int(result.reference_chain.wall)
+    chains = {"best design": result.chain, f"monodisperse, {size} granules of radius 1 (same number)": result.reference_chain,
+              f"granule 1 + {k} of radius {radius:.3g}: same mass and length ({mismatch:+.1%})": same}
     integ = result.integrator
     t_end = max(float(simulate(ch, integ).t_end) for ch in chains.values())
     grid = np.arange(0.0, t_end + dt / 2, dt)
@@ -50,8 +61,8 @@ def compute(result, dt: float = 0.02) -> dict:
 
 def plot(result, scale=None, fig=None, data=None):
     """Two panels: (a) every evaluation's objective and the best so far, with the monodisperse
-    reference; (b) the best design's wall force against a monodisperse chain of the same size and
-    one of the same mass behind the same struck granule. Physical units with ``scale`` (a :class:`granchain.units.Scale`)."""
+    reference; (b) the best design's wall force against a monodisperse chain of the same number of
+    granules and one of the same length and mass behind the same struck granule. Physical units with ``scale`` (a :class:`granchain.units.Scale`)."""
     import matplotlib.pyplot as plt
 
     d = compute(result) if data is None else data
@@ -75,7 +86,7 @@ def plot(result, scale=None, fig=None, data=None):
     ref, _ = conv(d["reference"], obj.kind)
     ax1.plot(d["evaluation"], vals, ".", ms=3, color="0.6", label="each evaluation")
     ax1.plot(d["evaluation"], best, "-", color="C0", lw=2, label="best so far")
-    ax1.axhline(ref, color="C3", ls="--", label="monodisperse, same size")
+    ax1.axhline(ref, color="C3", ls="--", label="monodisperse, same number of granules")
     ax1.set_xlabel("evaluation")
     ax1.set_ylabel(f"{obj.long_name}" + (f" ({unit})" if unit else ""))
     ax1.set_title("(a) convergence", loc="left")

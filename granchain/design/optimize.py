@@ -71,13 +71,23 @@ class _Progress:
             extra = f" ({replayed} already evaluated: looked up)" if replayed else ""
             print(f"{self.done}/{self.total} evaluations{extra}, best {best:.6g}, {rate:.1f}/s", file=sys.stderr, flush=True)
 
-    def close(self) -> None:
+    def close(self, best: float | None = None) -> None:
+        """End the report. A run may stop below its budget (differential evolution's generations and the
+        refinement do not divide it exactly): the bar is then closed at the evaluations done, and the
+        line report prints its last line, so that neither is left at a stale count."""
         if self.bar is not None:
+            if self.done < self.total:
+                self.bar.total = self.done
+                self.bar.refresh()
             self.bar.close()
+        elif self.enabled and self.done and self.done < self.total:
+            rate = self.done / max(time.monotonic() - self.t0, 1e-9)
+            tail = "" if best is None else f", best {best:.6g}"
+            print(f"{self.done} evaluations (of a budget of {self.total}) done{tail}, {rate:.1f}/s", file=sys.stderr, flush=True)
 
 
 def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int = 10, local: str | None = "powell",
-             statistic="mean", integrator=None, out=None, resume: bool = True, client=None, progress: bool = False,
+             statistic="mean", integrator=None, out=None, resume: bool = True, client=None, workers=None, progress: bool = False,
              mutation=(0.5, 1.0), recombination: float = 0.7) -> DesignResult:
     """The best design of ``space`` for ``objective`` within ``budget`` evaluations.
 
@@ -110,12 +120,18 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
         Continue the run saved in ``out`` (default); False: an existing run there is an error.
     client : dask.distributed.Client, optional
         Evaluate each generation on this cluster (one batch per worker).
+    workers : callable, optional
+        A map-like callable, as SciPy's ``differential_evolution(workers=...)`` takes it
+        (``multiprocessing.Pool(k).map``, ``concurrent.futures.Executor.map``, ``client.map`` of a Dask
+        client), or a Dask client: each generation is split into one batch per core and the batches are
+        mapped. The values, and so the run, do not depend on it. A process pool must start its
+        processes by "spawn" or "forkserver" (``multiprocessing.get_context("spawn").Pool(2)``): the
+        compiled kernels run on GNU OpenMP threads, which a forked process cannot use.
     progress : bool
         A progress bar (one line per generation when stderr is not a terminal).
     """
-    from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
 
-    evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client)
+    evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client, workers=workers)
     objective = evaluator.objective
     popsize = count("popsize", popsize, minimum=2)
     seed = count("seed", seed, minimum=0)
@@ -140,9 +156,33 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
     from os import fspath, makedirs
     from os import path as osp
 
-    history = History(space.names, record, None if out is None else osp.join(fspath(out), "history.zarr"), resume)
+    lock = None
     if out is not None:
         makedirs(fspath(out), exist_ok=True)
+        # One run at a time per directory (a run started again while the interrupted one is still ending,
+        # or twice): the ensembles' store lock, on the history (a ValueError naming the holder's PID).
+        from ..ensembles.lock import StoreLock
+
+        lock = StoreLock(osp.join(fspath(out), "history.zarr"))
+        lock.acquire()
+    try:
+        return _run(space, objective, evaluator, record, budget=budget, seed=seed, popsize=popsize, local=local,
+                    maxiter=maxiter, snap_budget=snap_budget, out=out, resume=resume, progress=progress, mutation=mutation,
+                    recombination=recombination)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _run(space, objective, evaluator, record, *, budget, seed, popsize, local, maxiter, snap_budget, out, resume, progress,
+         mutation, recombination) -> DesignResult:
+    """The search itself (``optimize`` checked the arguments and holds the run directory's lock)."""
+    from os import fspath
+    from os import path as osp
+
+    from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
+
+    history = History(space.names, record, None if out is None else osp.join(fspath(out), "history.zarr"), resume)
     bar = _Progress(budget, progress, f"design {space.kind}")
     best = [np.inf]
 
@@ -196,7 +236,7 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
             message += _snap_to_bounds(space, history, objective, budget - history.count, evaluate)
     finally:
         history.flush()
-        bar.close()
+        bar.close(objective.sense * best[0] if np.isfinite(best[0]) else None)
     result = DesignResult.from_history(space, objective, evaluator, history, seed=seed, budget=budget, message=message,
                                        version=__version__)
     if out is not None:
