@@ -108,10 +108,12 @@ def _statistic(values: np.ndarray, statistic) -> tuple:
 
 
 def default_integrator(space):
-    """Decorated chains: the ensembles' (``RKN4`` at :data:`granchain.ENSEMBLE_RTOL`; light granules set
-    its step, :func:`granchain.ensemble_integrator`); every other chain: ``DP5()``, :func:`granchain.simulate`'s
-    default, so that a reported value is exactly what ``simulate(space.chain(best))`` gives."""
-    return ensemble_integrator("decorated") if space.chain_kind == "decorated" else DP5()
+    """Decorated chains: the ensembles' method and tolerances (``RKN4.relaxed`` at
+    :data:`granchain.ENSEMBLE_RTOL`; light granules set its step, :func:`granchain.ensemble_integrator`),
+    every granule integrated to the end (a design's objective may read any granule or contact, and its
+    chains are short); every other chain: ``DP5()``, :func:`granchain.simulate`'s default, so that a
+    reported value is exactly what ``simulate(space.chain(best))`` gives."""
+    return ensemble_integrator("decorated", windowed=False) if space.chain_kind == "decorated" else DP5()
 
 
 def _check_statistic(statistic):
