@@ -197,7 +197,13 @@ def stored_record(out) -> dict | None:
 
 
 def stored_setting(out) -> str:
-    """The ``pulse_window`` setting the store ``out`` was started with: "auto" if its record has windows,
-    "full" if it has none (every store of granchain < 0.5); "auto" where there is no store yet."""
+    """The ``pulse_window`` setting the store ``out`` was started with: "auto" if its record has windows, or
+    has none because no integrator of the run kept a trailing window on its chains (a wall or a static
+    load switches it off) although it had one (the windowed defaults); "full" for a store whose
+    integrators have no trailing window (the relaxed defaults of every store before granchain 0.5, or
+    pulse_window="full"); "auto" where there is no store yet."""
     rec = stored_record(out)
-    return AUTO if rec is None or "pulse_window" in rec else FULL
+    if rec is None or "pulse_window" in rec:
+        return AUTO
+    integrators = list((rec.get("chain_integrators") or {}).values()) + [rec.get("integrator")]
+    return AUTO if any(isinstance(r, dict) and r.get("window_lag") for r in integrators) else FULL

@@ -747,6 +747,9 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
         diff = ", ".join(f"{k}: stored {flat_old.get(k)!r}, asked {flat_new.get(k)!r}"
                          for k in sorted(set(flat_old) | set(flat_new)) if flat_old.get(k) != flat_new.get(k))
         hint = " (a store can be extended to more realisations, never shrunk)" if old.get("realizations") != new["realizations"] else ""
+        if old.get("pulse_window") != new.get("pulse_window") and "pulse_window" not in old:
+            hint += (" (a store written before granchain 0.5 with a trailing window, whose granules behind it report the "
+                     "velocity they left with, is resumed with pulse_window=\"full\", on the command line --pulse-window full)")
         if old.get("integrator") != new.get("integrator") or old.get("chain_integrators") != new.get("chain_integrators"):
             hint += (" (a store written with the exact DP5, every granule integrated to the end as before "
                      "granchain 0.3, is resumed with integrator=granchain.DP5(1e-6, 1e-9), on the command line "
