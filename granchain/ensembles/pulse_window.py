@@ -23,7 +23,9 @@ The trailing window then stays :data:`BUFFER` observed granules behind the first
 
 :func:`check` proves it on the ensemble itself: per granule, the latest arrival time of all the
 realisations against the window's end, and how many realisations' pulses had not passed granule
-k + L when the window closed (the count the rule aims to keep at zero).
+k + L when the window closed. On the paper's ensembles (30,000 realisations of each chain at N = 11, 16,
+26) there are none, and the latest arrival at every granule is at least 14.5 time units (six granules'
+travel) before its window's end.
 """
 
 from __future__ import annotations
