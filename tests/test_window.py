@@ -300,16 +300,16 @@ def test_default_keeps_the_averaged_pulse_in_each_granules_window(request, reali
     """The default (trailing window, each granule's averaged-pulse window): wherever <v_k(t)> is recorded
     (t <= pulse_window_end) it passes the relaxed criterion against the exact DP5 (granule k is integrated
     there in every realisation), after it it is NaN (not computed), and the windows hold the pulse: the
-    averaged pulse's maximum inside, every realisation's arrival before the window's end and its pulse
-    past granule k + L (L the trailing window's lag) when the window closes (pulse_window.check). The
-    windows are finite for every granule but the last L (there the trailing window never cuts)."""
+    averaged pulse's maximum inside, every realisation's arrival before the window's end, and at most 2 %
+    of them not yet at granule k + AHEAD when the window closes (pulse_window.check). The windows are
+    finite for every granule but the last AHEAD."""
     from granchain.ensembles import pulse_window
 
     p = _pulses(request, realizations)
     ds, ref = p["default"], p["exact"]
     ends = ds["pulse_window_end"]
-    assert int(ds["pulse_window_lag"]) == WINDOW_LAG
-    assert np.all(np.isfinite(ends[:N - WINDOW_LAG])) and np.all(np.isinf(ends[N - WINDOW_LAG:]))
+    assert int(ds["pulse_window_ahead"]) == pulse_window.AHEAD
+    assert np.all(np.isfinite(ends[:N - pulse_window.AHEAD])) and np.all(np.isinf(ends[N - pulse_window.AHEAD:]))
     inside = ds["time"] <= ends
     assert bool(ds["mean_velocity"].where(~inside).isnull().all()), "values recorded past a window's end"
     assert bool(ds["mean_velocity"].where(inside, 0.0).notnull().all()), "a value missing inside a window"
@@ -317,7 +317,8 @@ def test_default_keeps_the_averaged_pulse_in_each_granules_window(request, reali
     assert worst < 1e-4 and in_stderr < 0.1, (worst, in_stderr)
     check = pulse_window.check(ds.expand_dims("chain"))
     assert bool(check["peak_inside"].all()) and float(check["margin"].min()) > 0.0
-    assert int(check["unfinished"].sum()) == 0, check["unfinished"].values
+    # the slowest realisations' pulses may not have reached k + AHEAD yet (measured: 16 of 150 x 21 windows)
+    assert int(check["unfinished"].max()) <= 0.02 * realizations, check["unfinished"].values
     # negative control: the trailing window alone (granules report the velocity they left with) fails it
     assert pulse_deviation(p["windowed"], ref)[0] > 1e-4
 

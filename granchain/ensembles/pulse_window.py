@@ -14,18 +14,17 @@ not after (``mean_velocity`` is NaN there: not computed).
 The window must hold the whole averaged pulse: the pulse of every realisation, whose arrival times
 spread with the randomness of the chain. It is set from the ensemble's own first
 :data:`PILOT_REALIZATIONS` realisations (integrated once, peaks only, at linear cost), by the rule the
-trailing window applies to one realisation, applied to the ensemble: granule k's window closes when the
-pulse has passed granule k + L in the slowest realisations, L the trailing window's lag in observed
-granules, i.e. at the pilot's mean arrival time at granule k + L plus :data:`SPREAD` standard
-deviations of it. The last L granules, which the pulse never leaves by L granules, keep the whole grid.
+trailing window applies to one realisation (it drops a granule once the pulse is some granules on),
+applied to the ensemble: granule k's window closes when the
+pulse has passed granule k + :data:`AHEAD` in the slow realisations, i.e. at the pilot's mean arrival
+time at granule k + AHEAD plus :data:`SPREAD` standard deviations of it. The last AHEAD granules keep
+the whole grid.
 The trailing window then stays :data:`BUFFER` observed granules behind the first window still open
 (:func:`keep_until`), so that the contact it drops at its edge cannot reach a recorded velocity.
 
 :func:`check` proves it on the ensemble itself: per granule, the latest arrival time of all the
-realisations against the window's end, and how many realisations' pulses had not passed granule
-k + L when the window closed. On the paper's ensembles (30,000 realisations of each chain at N = 11, 16,
-26) there are none, and the latest arrival at every granule is at least 14.5 time units (six granules'
-travel) before its window's end.
+realisations against the window's end, and how many realisations' pulses had not yet reached
+granule k + AHEAD when the window closed.
 """
 
 from __future__ import annotations
@@ -34,19 +33,18 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["PILOT_REALIZATIONS", "SPREAD", "AUTO", "FULL", "applies", "window_ends", "check", "stored_setting"]
+__all__ = ["PILOT_REALIZATIONS", "SPREAD", "AHEAD", "BUFFER", "AUTO", "FULL", "applies", "window_ends", "check", "stored_setting"]
 
 #: Realisations 0..PILOT_REALIZATIONS-1 of the ensemble (whatever its size: the same draws, so an
 #: ensemble extended later gets the same windows) measure the arrival times the windows are built from.
 PILOT_REALIZATIONS = 64
 #: Standard deviations of the pilot's arrival times added to their mean. A realisation that arrives this
-#: late still has its pulse L granules past k (about 17 time units in the paper's chain, where the
-#: averaged pulse at k has fallen to a few per cent of its maximum) when the window closes; the rarer
-#: ones later still (a very small granule is a weak contact: the arrival times have a long right tail)
-#: keep their maximum and most of its fall inside, and :func:`check` counts them. Each standard
-#: deviation costs about sigma/S more granules integrated behind the pulse (S the time per granule),
-#: and sigma grows as sqrt(k) along the chain: with 3 a realisation of N = 101 costs ~4.4x one of
-#: N = 26 (linear: 4; with 4: ~5.2; the whole grid: ~14; benchmarks/bench_scaling.py).
+#: late has its pulse :data:`AHEAD` granules past k when the window closes; the rarer ones later still
+#: (a very small granule is a weak contact: the arrival times have a long right tail) keep their maximum
+#: and most of its fall inside, and :func:`check` counts them. Each standard deviation costs about
+#: sigma/S more granules integrated behind the pulse (S the time per granule), and sigma grows as
+#: sqrt(k) along the chain (with 4 a realisation of N = 101 cost ~5.2x one of N = 26, with 3 ~4.7x at
+#: AHEAD = 7; linear is 4, the whole grid ~14: benchmarks/bench_scaling.py).
 SPREAD = 3.0
 #: Observed granules between the trailing window's edge and the first granule whose window is still open.
 #: A cut drops the contact at the edge: a granule behind it that would have struck the edge granule again
@@ -56,6 +54,14 @@ SPREAD = 3.0
 #: buffer of 3 (4e-5 with 2), and within 0.013 (2.9 standard errors, at the windows' ends) without one
 #: (tests/test_window.py).
 BUFFER = 3
+
+#: Observed granules the pulse has passed, in the realisations :data:`SPREAD` standard deviations slower
+#: than the mean, when granule k's window closes. A single realisation's velocity at k has fallen below a
+#: tenth of its maximum when the front is 5 granules on in 95 % of the paper's realisations and granules
+#: (below 5 %: median 2, 90th percentile 6; 40 chains of N = 26 measured), and the realisations of
+#: average speed are SPREAD sigma / S granules further on still. 7 (the trailing window's own lag, under
+#: which a realisation's peaks are final) cost a realisation of N = 101 ~4.7-5.0x one of N = 26, 5 ~4.4x.
+AHEAD = 5
 
 #: The settings of ``run_ensemble(pulse_window=...)``.
 AUTO = "auto"
@@ -73,24 +79,23 @@ def window_lag(integrator, family) -> int:
     return int(getattr(ran, "window_lag", None) or 0)
 
 
-def applies(spec) -> dict:
-    """{chain kind: lag} of the kinds of ``spec`` (an ``EnsembleSpec``) whose integrator runs a trailing
-    window on the family's chains, and so gets an averaged-pulse window (with ``pulse_window="auto"``)."""
-    lags = {kind: window_lag(integ, spec.family) for kind, integ in spec.chain_integrators.items()}
-    return {kind: lag for kind, lag in lags.items() if lag > 0}
+def applies(spec) -> tuple:
+    """The chain kinds of ``spec`` (an ``EnsembleSpec``) whose integrator runs a trailing window on the
+    family's chains, and so get averaged-pulse windows (with ``pulse_window="auto"``)."""
+    return tuple(kind for kind, integ in spec.chain_integrators.items() if window_lag(integ, spec.family) > 0)
 
 
-def ends_from_arrivals(arrivals: np.ndarray, lag: int, extra: float = 0.0) -> np.ndarray:
+def ends_from_arrivals(arrivals: np.ndarray, extra: float = 0.0) -> np.ndarray:
     """Window ends (K,) from arrival times (R, K) of R realisations at the K observed granules: for
-    granule q, the mean arrival time at q + ``lag`` plus :data:`SPREAD` standard deviations (+ ``extra``,
-    e.g. the aligned pulse's largest lag); ``inf`` for the last ``lag`` granules. Made non-decreasing
-    along the chain (a window never closes before the one of a granule behind it)."""
+    granule q, the mean arrival time at q + :data:`AHEAD` plus :data:`SPREAD` standard deviations
+    (+ ``extra``, e.g. the aligned pulse's largest lag); ``inf`` for the last AHEAD granules. Made
+    non-decreasing along the chain (a window never closes before the one of a granule behind it)."""
     arrivals = np.asarray(arrivals, dtype=float)
     K = arrivals.shape[1]
     ends = np.full(K, np.inf)
-    if K > lag:
-        ahead = arrivals[:, lag:]
-        ends[:K - lag] = np.nanmean(ahead, axis=0) + SPREAD * np.nanstd(ahead, axis=0, ddof=1) + extra
+    if K > AHEAD:
+        later = arrivals[:, AHEAD:]
+        ends[:K - AHEAD] = np.nanmean(later, axis=0) + SPREAD * np.nanstd(later, axis=0, ddof=1) + extra
     return np.maximum.accumulate(ends)
 
 
@@ -113,7 +118,7 @@ def window_ends(spec, compute_rows) -> dict:
 
     extra = max(0.0, float(spec.lags[-1])) if spec.lags is not None else 0.0
     out = {}
-    for kind, lag in applies(spec).items():
+    for kind in applies(spec):
         pilot = dataclasses.replace(spec, realizations=PILOT_REALIZATIONS, chunk_size=PILOT_REALIZATIONS, chains=(kind,),
                                     t_grid=np.zeros(1), lags=None, pulse_window=FULL, pulse_ends=None)
         res = compute_rows(pilot)
@@ -122,7 +127,7 @@ def window_ends(spec, compute_rows) -> dict:
             raise RuntimeError(f"only {int(ok.sum())} of the {PILOT_REALIZATIONS} pilot realisations of the {kind} chains "
                                "succeeded, too few to set the averaged pulse's windows: run with pulse_window='full' "
                                "(CLI: --pulse-window full) and look at the realisations' status")
-        out[kind] = ends_from_arrivals(np.asarray(res["peak_time"][0])[ok], lag, extra)
+        out[kind] = ends_from_arrivals(np.asarray(res["peak_time"][0])[ok], extra)
     return out
 
 
@@ -133,12 +138,13 @@ def check(ds) -> "xarray.Dataset":  # noqa: F821
     - ``window_end``: the window's end (inf: the whole grid);
     - ``latest_arrival``: the latest arrival time (peak time) of all successful realisations;
     - ``margin``: window_end - latest_arrival (every realisation's peak at k lies inside when > 0);
-    - ``unfinished``: realisations whose pulse had not passed granule k + L (L the window's lag) when
-      the window closed, i.e. whose own trailing window would have kept granule k longer (0: the
-      window held every realisation's pulse as the trailing window itself defines it);
+    - ``unfinished``: realisations whose pulse had not yet reached granule k + A (A the store's
+      ``pulse_window_ahead``) when the window closed: the slowest, about one in a hundred in the
+      paper's chains, whose maximum at k still lies inside (``margin``) and whose velocity there is
+      then mostly down to its tail;
     - ``peak_inside``: the averaged pulse's maximum lies strictly inside the window.
 
-    Empty (no granule) for an ensemble run without windows."""
+    Empty (no variable) for an ensemble run without windows."""
     import xarray as xr
 
     if "pulse_window_end" not in ds:
@@ -149,17 +155,16 @@ def check(ds) -> "xarray.Dataset":  # noqa: F821
     ok = ds["status"] == SUCCESS
     arrival = ds["peak_time"].where(ok)
     latest = arrival.max("realization")
-    lag = int(ds.attrs.get("pulse_window_lag", 0))
     K = ds.sizes["granule"]
+    ahead = np.broadcast_to(np.asarray(ds["pulse_window_ahead"].values, dtype=np.int64), (ds.sizes["chain"],))
+    t = arrival.transpose("chain", "realization", "granule").values
+    e = ends.transpose("chain", "granule").values
     unfinished = np.zeros((ds.sizes["chain"], K), dtype=np.int64)
-    if lag > 0:
-        t = arrival.values  # (chain, realization, granule)
-        e = ends.values
-        for q in range(K - lag):
-            unfinished[:, q] = np.sum(t[:, :, q + lag] > e[:, q, None], axis=1)
-    mean = ds["mean_velocity"]
-    t_peak = mean.fillna(-np.inf).idxmax("time")
-    inside = np.isfinite(ends) & (t_peak < ends) | ~np.isfinite(ends)
+    for c, a in enumerate(ahead):
+        for q in range(K - a if a > 0 else 0):
+            unfinished[c, q] = np.sum(t[c, :, q + a] > e[c, q])
+    t_peak = ds["mean_velocity"].fillna(-np.inf).idxmax("time")
+    inside = (t_peak < ends) | ~np.isfinite(ends)
     return xr.Dataset({"window_end": ends, "latest_arrival": latest, "margin": ends - latest,
                        "unfinished": (("chain", "granule"), unfinished), "peak_inside": inside})
 
@@ -168,7 +173,7 @@ def record(spec) -> dict:
     """The windows' part of the ensemble's parameter record (compared on resume, so that a store is only
     ever continued with the windows it was started with): the rule, and the ends once set (JSON: inf
     as null)."""
-    rec = {"rule": AUTO, "pilot_realizations": PILOT_REALIZATIONS, "spread": SPREAD}
+    rec = {"rule": AUTO, "pilot_realizations": PILOT_REALIZATIONS, "spread": SPREAD, "ahead": AHEAD, "buffer": BUFFER}
     if spec.pulse_ends is not None:
         rec["ends"] = {kind: [None if not np.isfinite(x) else float(x) for x in e] for kind, e in spec.pulse_ends.items()}
     return rec

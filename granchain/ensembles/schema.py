@@ -124,8 +124,8 @@ WINDOW = (
              "end of the averaged pulse's window at large granule k: <v_k(t)> recorded for t <= it (inf: whole grid)",
              {"comment": "granule k stays integrated in every realisation until this time (the trailing window waits "
                          "for it); set from the ensemble's first realisations (granchain.ensembles.pulse_window)"}),
-    Variable("pulse_window_lag", ("chain",), "int64", 0, "1",
-             "lag of the trailing window in observed granules (0: none)"),
+    Variable("pulse_window_ahead", ("chain",), "int64", 0, "1",
+             "observed granules the pulse has passed in the slow realisations when a window closes (0: no windows)"),
 )
 
 #: The aligned pulse (only in ensembles run with ``lags``): <v_k(t_k^peak + tau)> over successful

@@ -191,15 +191,15 @@ def finalize(ds, spec, sum_v, sum_v2, n_valid, sum_a=None, sum_a2=None):
     with averaged-pulse windows, NaN (not computed) past each granule's window, and the windows themselves."""
     mean, stderr = mean_from_sums(sum_v, sum_v2, n_valid, spec.fixed_point_bits)
     if spec.pulse_ends:
-        from .pulse_window import applies
+        from .pulse_window import AHEAD, applies
 
-        lags = applies(spec)
+        kinds = applies(spec)
         ends = np.array([spec.pulse_ends.get(c, np.full(sum_v.shape[1], np.inf)) for c in spec.chains])  # (chain, granule)
         past = np.asarray(spec.t_grid)[None, None, :] > ends[:, :, None]
         mean[past] = np.nan
         stderr[past] = np.nan
         ds["pulse_window_end"].values = ends
-        ds["pulse_window_lag"].values = np.array([lags.get(c, 0) for c in spec.chains], dtype=np.int64)
+        ds["pulse_window_ahead"].values = np.array([AHEAD if c in kinds else 0 for c in spec.chains], dtype=np.int64)
     ds["mean_velocity"].values, ds["mean_velocity_stderr"].values = mean, stderr
     if spec.lags is not None:
         ds["aligned_velocity"].values, ds["aligned_velocity_stderr"].values = mean_from_sums(
