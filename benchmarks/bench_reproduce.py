@@ -171,7 +171,7 @@ def _ks_cpu(*args, **kwargs):
 analysis.ks_normal = _ks_cpu
 code = granchain.cli.main(sys.argv[2:])
 _charge(time.perf_counter())
-result = {"phases": acc, "main_cpu": cpu_acc, "process_cpu": time.process_time(), "total": time.perf_counter() - T0, "cpu": cpu,
+result = {"granchain": granchain.__file__, "phases": acc, "main_cpu": cpu_acc, "process_cpu": time.process_time(), "total": time.perf_counter() - T0, "cpu": cpu,
           "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "code": code}
 with open(sys.argv[1], "w") as f:
     json.dump(result, f)
@@ -209,12 +209,17 @@ def run_side(tree: Path, realizations: int, quick: bool, workdir: Path, tag: str
     argv = ["reproduce", "--out", str(out), "--quiet", "--realizations", str(realizations)] + (["--quick"] if quick else [])
     env = dict(os.environ, PYTHONPATH=str(tree), MPLBACKEND="Agg")
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", DRIVER, str(result)] + argv, env=env, capture_output=True, text=True)
+    # cwd: ``python -c`` puts the working directory first on sys.path, ahead of PYTHONPATH (run from a
+    # checkout, both sides would import the checkout's granchain)
+    proc = subprocess.run([sys.executable, "-c", DRIVER, str(result)] + argv, env=env, capture_output=True, text=True,
+                          cwd=workdir)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise SystemExit(f"{tag}: granchain reproduce failed:\n{proc.stderr[-3000:]}")
     res = json.loads(result.read_text())
     res["process_wall"] = wall
+    if res.get("granchain") != str(tree / "granchain" / "__init__.py"):
+        raise SystemExit(f"{tag}: imported {res.get('granchain')}, not the tree under test {tree}")
     res["summary"] = json.loads((out / "summary.json").read_text())
     shutil.rmtree(out, ignore_errors=True)
     return res
