@@ -173,6 +173,31 @@ def test_ks_statistic_is_goodness_of_fit_statistic():
     assert A.ks_distance(x) == pytest.approx(res.statistic, rel=1e-12)  # scipy's fit uses ddof = 1 too
 
 
+def _goodness_of_fit_pvalue(x, n_mc_samples, rng, batch=100):
+    """The Lilliefors p-value as ks_normal computed it before its screen: scipy.stats.goodness_of_fit's null
+    distribution in batches, (1 + #{null >= d}) / (B + 1)."""
+    d, gen, null = A.ks_distance(x), np.random.default_rng(rng), []
+    for k in np.diff(np.r_[0:n_mc_samples:batch, n_mc_samples]):
+        null.append(stats.goodness_of_fit(stats.norm, x, statistic=A._ks_statistic, n_mc_samples=int(k), rng=gen).null_distribution)
+    return (1.0 + np.count_nonzero(np.concatenate(null) >= d * (1 - 1e-12))) / (n_mc_samples + 1.0)
+
+
+def test_lilliefors_screen_gives_goodness_of_fit_pvalues():
+    """ks_normal sorts only the resamples its O(n) bound cannot rule out: its resamples are
+    goodness_of_fit's (bitwise), the bound never falls below the statistic, and the p-values are
+    goodness_of_fit's, near the 5 % point (where every resample counts) and at the floor."""
+    x = np.random.default_rng(3).gamma(20.0, size=400)
+    loc, scale = np.mean(x), np.std(x, ddof=1)
+    null = stats.goodness_of_fit(stats.norm, x, statistic=A._ks_statistic, n_mc_samples=50, rng=np.random.default_rng(5))
+    data = np.random.default_rng(5).standard_normal((50, x.size)) * scale + loc
+    assert np.array_equal(A._ks_statistic(None, data), null.null_distribution)
+    assert np.all(A._ks_upper_bound(data) >= A._ks_statistic(None, data))
+    assert np.array_equal(A._ks_statistic(None, data[[4, 17]]), null.null_distribution[[4, 17]])  # rows alone: the same bits
+    samples = [np.random.default_rng(s).standard_t(15, size=500) for s in range(5)] + [np.random.default_rng(9).exponential(size=60)]
+    for x in samples:
+        assert A.ks_normal(x, n_mc_samples=250, rng=3).pvalue == _goodness_of_fit_pvalue(x, 250, 3)
+
+
 def test_lilliefors_pvalues_are_calibrated_where_plain_ks_is_not():
     lil, plain = [], []
     for seed in range(40):

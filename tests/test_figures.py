@@ -62,6 +62,19 @@ def test_fig1(stores):
     data.to_dataset()
 
 
+def test_save_lays_out_once_and_keeps_the_engine(stores, tmp_path):
+    """save() draws the PDF with the PNG's layout (constrained layout runs once) and gives the figure its
+    layout engine back: a later draw still lays it out, with nothing overlapping."""
+    from granchain.paper.figures import save
+
+    fig = fig1.plot(fig1.compute(stores[11][0]))
+    engine = fig.get_layout_engine()
+    paths = save(fig, tmp_path / "fig1")
+    assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 0 for p in paths)
+    assert fig.get_layout_engine() is engine
+    _check(fig)
+
+
 def test_fig2_jackknife_and_fallback(stores):
     ds, sums = stores[26]
     data = fig2.compute(ds, sums=sums)

@@ -53,6 +53,13 @@ def test_chunk_sums_from_a_stored_ensemble_reproduce_its_mean():
     assert sums.mean() == pytest.approx(ds["mean_velocity"].transpose("chain", "granule", "time").values, rel=1e-14, nan_ok=True)
 
 
+def test_chunk_sums_means_are_computed_once_and_read_only():
+    sums = A.ChunkSums.from_store("tests/data/v0.1.0-decorated-N6.zarr")
+    assert sums.mean(1) is sums.mean(1) and sums.mean() is sums.mean()
+    with pytest.raises(ValueError, match="read-only"):
+        sums.mean(0)[0, 0, 0] = 1.0
+
+
 def test_quantile_skewness():
     rng = np.random.default_rng(4)
     assert A.quantile_skewness(rng.normal(size=200_000)) == pytest.approx(0, abs=0.01)

@@ -69,6 +69,26 @@ def test_report_numbers_equal_analysis_functions(run):
     assert all(r["range"] != "-" for r in recs.values() if r["section"].startswith(("Fig. 2", "Fig. 3", "headline")))
 
 
+def test_curve_agreement_from_a_fit_at_hand_is_the_refitted_one(run):
+    """paper_curve_agreement(fit=...) takes the curves of fit_averaged_decay's replicates instead of fitting
+    them again: the same numbers, bitwise; a fit of another range or chain is refused."""
+    out, res = run
+    ds = res["datasets"][26]
+    sums = analysis.ChunkSums.from_store(_reproduce.ensemble_path(out, 26))
+    for s in (sums, None):
+        fit = analysis.fit_averaged_decay(ds, "effective", (4, 25), s)
+        a = analysis.paper_curve_agreement(ds, "effective", (4, 25), s)
+        b = analysis.paper_curve_agreement(ds, "effective", (4, 25), s, fit=fit)
+        for name in ("granule", "deviation", "stderr", "envelope"):
+            assert np.array_equal(getattr(a, name), getattr(b, name))
+        assert a.method == b.method
+    with pytest.raises(ValueError, match="fit must be"):
+        analysis.paper_curve_agreement(ds, "effective", (5, 25), sums, fit=fit)
+    with pytest.raises(ValueError, match="fit must be"):
+        analysis.paper_curve_agreement(ds, "effective", (4, 25), sums,
+                                       fit=analysis.fit_averaged_decay(ds, "effective", (4, 25), sums, variable="t"))
+
+
 def test_report_html_has_unbroken_paragraphs_and_bounds(run):
     out, _ = run
     html = (out / "report.html").read_text()

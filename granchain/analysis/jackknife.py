@@ -87,7 +87,7 @@ class ChunkSums:
     integer / 2**``fixed_point_bits``; ``n_valid``: (chunk, chain). Only finished chunks
     belong here (see :meth:`from_store`). ``window_end`` (chain, granule), optional: the averaged
     pulse's windows of a run with them (the store's ``pulse_window_end``); means past them are NaN, as
-    the store's ``mean_velocity`` (the sums hold nothing there).
+    the store's ``mean_velocity`` (the sums there are not those of every realisation).
     """
 
     sum_v: np.ndarray
@@ -107,6 +107,9 @@ class ChunkSums:
             raise ValueError("chains and time must match the chain and time axes of sum_v")
         if sv.shape[0] < 2:
             raise ValueError("a jackknife over chunks needs at least 2 finished chunks")
+        # mean(leave_out) by leave_out: every jackknife over these chunks asks for the same chunks + 1 means
+        object.__setattr__(self, "_means", {})
+        object.__setattr__(self, "_totals", None)
 
     @classmethod
     def from_store(cls, path) -> "ChunkSums":
@@ -127,17 +130,25 @@ class ChunkSums:
         return int(np.asarray(self.sum_v).shape[0])
 
     def mean(self, leave_out: int | None = None) -> np.ndarray:
-        """<v_k(t)> (chain, granule, time) over all chunks, or without chunk ``leave_out``."""
-        sv, nv = np.asarray(self.sum_v), np.asarray(self.n_valid)
-        s, n = sv.sum(axis=0), nv.sum(axis=0)
-        if leave_out is not None:
-            s, n = s - sv[leave_out], n - nv[leave_out]  # exact: integer arithmetic
-        with np.errstate(invalid="ignore", divide="ignore"):
-            m = (s.astype(float) / 2.0**self.fixed_point_bits) / n.astype(float)[:, None, None]
-        m = np.where(n[:, None, None] > 0, m, np.nan)
-        if self.window_end is not None:
-            m[np.asarray(self.time)[None, None, :] > np.asarray(self.window_end)[:, :, None]] = np.nan
-        return m
+        """<v_k(t)> (chain, granule, time) over all chunks, or without chunk ``leave_out`` (read-only: computed
+        once per ``leave_out`` and shared by every statistic that asks for it); NaN past the averaged
+        pulse's windows (``window_end``), as the store's ``mean_velocity``."""
+        key = None if leave_out is None else int(leave_out)
+        if key not in self._means:
+            sv, nv = np.asarray(self.sum_v), np.asarray(self.n_valid)
+            if self._totals is None:  # the sums over all chunks, computed once
+                object.__setattr__(self, "_totals", (sv.sum(axis=0), nv.sum(axis=0)))
+            s, n = self._totals
+            if key is not None:
+                s, n = s - sv[key], n - nv[key]  # exact: integer arithmetic
+            with np.errstate(invalid="ignore", divide="ignore"):
+                m = (s.astype(float) / 2.0**self.fixed_point_bits) / n.astype(float)[:, None, None]
+            m = np.where(n[:, None, None] > 0, m, np.nan)
+            if self.window_end is not None:
+                m[np.asarray(self.time)[None, None, :] > np.asarray(self.window_end)[:, :, None]] = np.nan
+            m.setflags(write=False)
+            self._means[key] = m
+        return self._means[key]
 
 
 def chunk_jackknife(statistic, sums: ChunkSums) -> Jackknife:

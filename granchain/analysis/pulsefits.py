@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import analysis as _A
-from .jackknife import ChunkSums, Jackknife, chunk_jackknife
+from .jackknife import ChunkSums, Jackknife, chunk_jackknife, jackknife_stderr
 
 __all__ = ["PulseFit", "CurveAgreement", "pulse_means", "pulse_jackknife", "fit_averaged_decay",
            "fit_averaged_arrival", "paper_curve_agreement", "rounding_envelope", "averaged_peak_gap"]
@@ -51,7 +51,9 @@ class PulseFit:
 
     ``fit`` is the fit on the whole ensemble (:class:`StretchedExpFit` or :class:`LinearFit`);
     ``stderr`` the jackknife errors of ``params`` (or the residual errors, see ``method``);
-    ``correlation`` the parameter correlation from the jackknife replicates (or the fit).
+    ``correlation`` the parameter correlation from the jackknife replicates (or the fit);
+    ``replicates`` the leave-one-chunk-out parameters (chunks, parameters), NaN where a replicate's fit
+    did not converge (no rows without per-chunk sums); ``variable`` what the fit's x is ("k" or "t").
     """
 
     quantity: str
@@ -62,6 +64,8 @@ class PulseFit:
     method: str
     fit: object
     correlation: np.ndarray
+    replicates: np.ndarray | None = None
+    variable: str = "k"
 
 
 def _range_mask(granule, fit_range):
@@ -69,7 +73,7 @@ def _range_mask(granule, fit_range):
     return (g >= fit_range[0]) & (g <= fit_range[1])
 
 
-def _pulse_fit(ds, quantity, chain, fit_range, stat, sums) -> PulseFit:
+def _pulse_fit(ds, quantity, chain, fit_range, stat, sums, variable="k") -> PulseFit:
     fit = stat(pulse_means(ds), full=True)
 
     def replicate(m):
@@ -85,7 +89,7 @@ def _pulse_fit(ds, quantity, chain, fit_range, stat, sums) -> PulseFit:
         err, method = tuple(float(e) for e in jk.stderr), jk.method
         corr = np.corrcoef(jk.replicates, rowvar=False)
     return PulseFit(quantity, chain, tuple(int(x) for x in fit_range), tuple(float(p) for p in fit.params),
-                    tuple(float(e) for e in err), method, fit, corr)
+                    tuple(float(e) for e in err), method, fit, corr, jk.replicates, variable)
 
 
 def _check_chain(ds, chain):
@@ -115,7 +119,7 @@ def fit_averaged_decay(ds, chain="effective", fit_range=(4, 25), sums: ChunkSums
         return f if full else f.params
 
     q = "max_t <v_k(t)> = a exp(-b k^c)" if variable == "k" else "max_t <v_k(t)> = a' exp(-b' t^c')"
-    return _pulse_fit(ds, q, chain, fit_range, stat, sums)
+    return _pulse_fit(ds, q, chain, fit_range, stat, sums, variable)
 
 
 def fit_averaged_arrival(ds, chain="effective", fit_range=(2, 25), sums: ChunkSums | None = None) -> PulseFit:
@@ -178,22 +182,40 @@ class CurveAgreement:
 
 
 def paper_curve_agreement(ds, chain="effective", fit_range=(4, 25), sums: ChunkSums | None = None,
-                          paper=_A.PAPER_FIG2, half_units=(5e-4, 5e-4, 5e-4)) -> CurveAgreement:
-    """The headline comparison of Fig. 2: our fitted curve against the paper's, per granule."""
+                          paper=_A.PAPER_FIG2, half_units=(5e-4, 5e-4, 5e-4), fit: PulseFit | None = None) -> CurveAgreement:
+    """The headline comparison of Fig. 2: our fitted curve against the paper's, per granule.
+
+    ``fit``: the :func:`fit_averaged_decay` of the same Dataset, chain, range and ``sums`` (variable
+    "k"), if already at hand: its fit and its leave-one-chunk-out parameters give the curves, instead of
+    fitting every replicate again (the same numbers; a replicate whose fit did not converge gives NaN
+    errors rather than an exception).
+    """
     _check_chain(ds, chain)
     granule, time = ds["granule"].values, ds["time"].values.astype(float)
     k = granule[_range_mask(granule, fit_range)].astype(float)
     ref = _A.stretched_exp(k, *paper)
+    if fit is not None:
+        groups = 0 if fit.replicates is None else fit.replicates.shape[0]
+        if (fit.chain, fit.variable, tuple(fit.fit_range)) != (chain, "k", tuple(int(x) for x in fit_range)) or \
+                groups != (0 if sums is None else sums.chunks):
+            raise ValueError(f"fit must be fit_averaged_decay(ds, {chain!r}, {tuple(fit_range)}, sums) of the same "
+                             f"sums, variable 'k'; got the {fit.chain!r} chain's fit over {fit.fit_range} (variable {fit.variable!r})")
+        value = fit.fit(k) / ref - 1
+        if sums is None:
+            jk = Jackknife(value, np.full(value.shape, np.nan), np.empty((0,) + value.shape), 0, "none")
+        else:
+            reps = np.stack([_A.stretched_exp(k, *p) / ref - 1 for p in fit.replicates])
+            jk = Jackknife(value, jackknife_stderr(reps), reps, reps.shape[0], fit.method)
+    else:
+        def stat(means):
+            v, _, _, _ = _A.pulse_peak(time, means[chain])
+            return _A.fit_stretched_exp(granule, v, fit_range=fit_range)(k) / ref - 1
 
-    def stat(means):
-        v, _, _, _ = _A.pulse_peak(time, means[chain])
-        return _A.fit_stretched_exp(granule, v, fit_range=fit_range)(k) / ref - 1
-
-    jk = pulse_jackknife(ds, stat, sums)
+        jk = pulse_jackknife(ds, stat, sums)
     err, method = jk.stderr, jk.method
     if sums is None:
-        fit = fit_averaged_decay(ds, chain, fit_range).fit
-        err, method = fit.stderr(k) / ref, RESIDUALS
+        full = (fit if fit is not None else fit_averaged_decay(ds, chain, fit_range)).fit
+        err, method = full.stderr(k) / ref, RESIDUALS
     return CurveAgreement(chain, tuple(int(x) for x in fit_range), k.astype(int), jk.value, np.asarray(err),
                           rounding_envelope(k, paper, half_units), method)
 

@@ -84,7 +84,9 @@ def open_store(path, *, group: str | None = None, load: bool = False):
         if params is None:
             raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters record in "
                              f"{os.path.join(text, '.zattrs')} or {os.path.join(text, 'progress', '.zattrs')}): {_WHAT_TO_GIVE}")
-        opener = lambda: xr.open_zarr(text, group=group, consolidated=False, zarr_format=2)  # noqa: E731
+        # Everything read at once (load) needs no Dask: chunks=None reads the same values ~5x faster.
+        opener = lambda: xr.open_zarr(text, group=group, consolidated=False, zarr_format=2,  # noqa: E731
+                                      **({"chunks": None} if load else {}))
     elif os.path.isfile(text):
         with open(text, "rb") as f:
             magic = f.read(8)

@@ -273,6 +273,21 @@ def writable_array(path, name: str):
     return arr
 
 
+def _write_together(writes) -> None:
+    """``array[region] = values`` for every (array, region, values), as one batch of Zarr's asynchronous
+    writes: the same bytes in the same files as one assignment after the other, but the ~15 writes of a
+    chunk overlap (each alone waits ~1 ms for Zarr's I/O thread) instead of queueing one by one. Returns
+    once every write is on disk; the first failure is raised."""
+    import asyncio
+
+    from zarr.core.sync import sync
+
+    async def together():
+        await asyncio.gather(*(array.async_array.setitem(region, values) for array, region, values in writes))
+
+    sync(together())
+
+
 def _region(dims, axis_dim, sl):
     return tuple(sl if d == axis_dim else slice(None) for d in dims)
 
@@ -503,7 +518,7 @@ class ZarrSink:
     def _progress(self):
         import xarray as xr
 
-        return xr.open_zarr(self.path, group="progress", consolidated=False)
+        return xr.open_zarr(self.path, group="progress", consolidated=False, chunks=None)
 
     def pending(self) -> list[int]:
         import zarr
@@ -535,12 +550,12 @@ class ZarrSink:
         for name in sums:
             values[f"progress/{name}"] = np.asarray(res[name], dtype=table[name].dtype)[None]
         check = np.array([[digest(values[name], values[name].dtype) for name in checked_variables(spec)]], dtype=np.int64)
-        for v in variables:
-            self._array(v.name)[_region(v.dims, "realization", sl)] = values[v.name]
         here = slice(j, j + 1)
-        for name in sums:
-            self._array(f"progress/{name}")[_region(table[name].dims, "chunk", here)] = values[f"progress/{name}"]
-        self._array("progress/checksum")[here] = check
+        writes = [(self._array(v.name), _region(v.dims, "realization", sl), values[v.name]) for v in variables]
+        writes += [(self._array(f"progress/{name}"), _region(table[name].dims, "chunk", here), values[f"progress/{name}"])
+                   for name in sums]
+        writes.append((self._array("progress/checksum"), here, check))
+        _write_together(writes)
         # The flag last: a chunk counts as done only once all its data and checksums are on disk.
         self._array("progress/done")[here] = np.ones(1, dtype=np.int8)
 
@@ -549,9 +564,11 @@ class ZarrSink:
         import zarr
 
         try:
+            # Read back without Dask (chunks=None): the same values, dtypes, attributes and encoding, at a
+            # fifth of the time of loading through Dask's scheduler (~0.5 s per N = 26 store of 30,000).
             with self._progress() as p:
                 prog = p.load()
-            with xr.open_zarr(self.path, consolidated=False) as d:
+            with xr.open_zarr(self.path, consolidated=False, chunks=None) as d:
                 ds = d.load()
             aligned = (prog["sum_a"].values.sum(0), prog["sum_a2"].values.sum(0)) if self.spec.lags is not None else ()
             ds = finalize(ds, self.spec, prog["sum_v"].values.sum(0), prog["sum_v2"].values.sum(0),

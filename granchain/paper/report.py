@@ -131,7 +131,7 @@ def _fig2_records(B: Builder, f2, datasets, sums_by_N, N):
         if lo < 2 or hi > N - 1:
             continue
         f = analysis.fit_averaged_decay(ds, f2.main, (lo, hi), sums)
-        g = analysis.paper_curve_agreement(ds, f2.main, (lo, hi), sums)
+        g = analysis.paper_curve_agreement(ds, f2.main, (lo, hi), sums, fit=f)
         moved = [abs(p - q) / e for p, q, e in zip(f.params, base.params, base.stderr)]
         B.add("Fig. 2 sensitivity", f"(a, b, c) refitted ({f2.main} chain)", list(f.params), list(f.stderr), None, "1",
               _krange((lo, hi)), f"unweighted least squares; s.e. {f.method}", None,

@@ -33,12 +33,25 @@ def panel_pair(ax=None, figsize=(7.0, 7.0), height_ratios=(1.4, 1)):
 
 
 def save(fig, stem) -> list[Path]:
-    """Write ``stem``.png (200 dpi) and ``stem``.pdf; return the paths."""
+    """Write ``stem``.png (200 dpi) and ``stem``.pdf; return the paths.
+
+    The PDF is drawn with the layout the PNG was drawn with: a layout engine (constrained layout)
+    runs once, not once per format (it is ~40 % of a draw; the PDF's own layout would move the axes
+    by < 1 pt, text measured at 72 instead of 200 dpi). The figure keeps its engine afterwards.
+    """
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = [stem.with_suffix(".png"), stem.with_suffix(".pdf")]
     fig.savefig(paths[0], dpi=200)
-    fig.savefig(paths[1])
+    engine = fig.get_layout_engine()
+    if engine is None:
+        fig.savefig(paths[1])
+        return paths
+    fig.set_layout_engine("none")
+    try:
+        fig.savefig(paths[1])
+    finally:
+        fig.set_layout_engine(engine)
     return paths
 
 

@@ -75,7 +75,7 @@ def compute(ds, fit_range=(4, 25), sums=None) -> Fig2Data:
         means[c] = analysis.mean_peak_amplitude(ds, c)
         fk[c] = analysis.fit_averaged_decay(ds, c, rng, sums, variable="k")
         ft[c] = analysis.fit_averaged_decay(ds, c, rng, sums, variable="t")
-        agree[c] = analysis.paper_curve_agreement(ds, c, rng, sums)
+        agree[c] = analysis.paper_curve_agreement(ds, c, rng, sums, fit=fk[c])  # the curves of fit_k's replicates
     return Fig2Data(chains, main, peaks, means, fk, ft, agree, rng, int(ds.sizes["realization"]))
 
 

@@ -128,7 +128,7 @@ def compute(datasets, chain: str = "decorated", shift: str = "mode", bins: int =
         g = max(2, min(int(n_blocks), num.size // 2))
         jk = {name: analysis.block_jackknife(f, num, theory, n_blocks=g) for name, f in stats.items()}
         parts.append((N, num, theory, shifted, hn, ht, outside, jk))
-    # The Lilliefors Monte Carlo (~1.2 s per panel at 30,000 values and B = 1000) on every core: its
+    # The Lilliefors Monte Carlo (~0.5 s per panel at 30,000 values and B = 1000) on every core: its
     # sampling, sorting and normal CDF run in NumPy and SciPy without the GIL, and each panel's
     # resamples come from their own seeded generator, so the p-values do not depend on the threads.
     with ThreadPoolExecutor(max_workers=max(1, min(len(parts), os.cpu_count() or 1))) as pool:
