@@ -6,11 +6,10 @@ picks, so a realisation of an ensemble is integrated by exactly the code (and to
 ``simulate`` uses. Each entry point is its own compiled function and Numba compiles a function on
 its first call: a run compiles the one kernel it uses (a first ``granchain pulse`` compiles DP5 for
 the paper's chain, not RKN4, Verlet or the real-contact loops). Each entry point has its own
-ensemble kernel (``batch.BATCH_KERNELS``), compiled only when an ensemble uses it. (The entry point
-cannot be an argument of a compiled function: a first-class function is then a run-time object,
-and Numba does not cache such code across processes.) A new compiled method adds its kind
-(``records.KIND_*``), an entry point here, its ensemble kernel in ``batch`` and its binding in
-``granchain.backends.numba_backend``.
+ensemble kernel calls it through its address (:func:`kernel_function`), so that one ensemble kernel
+serves every entry point and the entry point's machine code is the very code ``simulate`` runs,
+compiled once. A new compiled method adds its kind (``records.KIND_*``), an entry point here and its
+binding in ``granchain.backends.numba_backend``.
 
 The common contract of every single-chain kernel ``kernel(method, model, run, state, out)``:
 integrate ``model`` from ``state`` at t = 0 with ``method`` (``records.Method``), record the observed
@@ -21,7 +20,8 @@ when the chain ends in a wall, fill ``info`` (``records.INFO_*``) and return a s
 
 from __future__ import annotations
 
-from numba import njit
+from numba import njit, typeof
+from numba.core.types import WrapperAddressProtocol
 
 from .jit import JIT
 from .records import KIND_DP5, KIND_RKN4, KIND_VERLET, Steps
@@ -92,3 +92,33 @@ def chain_kernel(kind: int, params):
 def integrate_chain(method, model, run, state, out):
     """Integrate one chain with the kernel of ``method`` and ``model`` (see the module's contract)."""
     return chain_kernel(method.kind, model.params)(method, model, run, state, out)
+
+
+class _KernelFunction(WrapperAddressProtocol):
+    """An entry point compiled for one signature, as a first-class function (Numba's wrapper address
+    protocol): a compiled function that takes it calls the entry point's machine code through its
+    address, without linking the entry point's code into its own."""
+
+    def __init__(self, kernel, signature):
+        self.kernel = kernel
+        self.sig = signature
+
+    def __wrapper_address__(self) -> int:
+        from numba.experimental.function_type import _get_wrapper_address
+
+        return _get_wrapper_address(self.kernel, self.sig)
+
+    def signature(self):
+        return self.sig
+
+
+def kernel_function(kernel, *records):
+    """The entry point ``kernel`` (:func:`chain_kernel`) as a first-class function for calls with
+    arguments of the types of ``records`` (method, model, run, state, out), compiled now (or loaded
+    from Numba's cache) for them. Under ``NUMBA_DISABLE_JIT`` the plain Python function."""
+    if not hasattr(kernel, "py_func"):
+        return kernel
+    args = tuple(typeof(r) for r in records)
+    kernel.compile(args)
+    (sig,) = [s for s in kernel.nopython_signatures if s.args == args]
+    return _KernelFunction(kernel, sig)
