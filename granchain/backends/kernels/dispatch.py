@@ -5,11 +5,12 @@ among them.
 picks, so a realisation of an ensemble is integrated by exactly the code (and to the bit) that
 ``simulate`` uses. Each entry point is its own compiled function and Numba compiles a function on
 its first call: a run compiles the one kernel it uses (a first ``granchain pulse`` compiles DP5 for
-the paper's chain, not RKN4, Verlet or the real-contact loops). Each entry point has its own
-ensemble kernel calls it through its address (:func:`kernel_function`), so that one ensemble kernel
-serves every entry point and the entry point's machine code is the very code ``simulate`` runs,
-compiled once. A new compiled method adds its kind (``records.KIND_*``), an entry point here and its
-binding in ``granchain.backends.numba_backend``.
+the paper's chain, not RKN4, Verlet or the real-contact loops). The Runge-Kutta entry points are
+made by ``rkloop.rk_kernel``, with the method and the model class constants of their code. The
+ensemble kernel calls an entry point through its address (:func:`kernel_function`), so that one
+ensemble kernel serves every entry point and the entry point's machine code is the very code
+``simulate`` runs, compiled once. A new compiled method adds its kind (``records.KIND_*``), an entry
+point here and its binding in ``granchain.backends.numba_backend``.
 
 The common contract of every single-chain kernel ``kernel(method, model, run, state, out)``:
 integrate ``model`` from ``state`` at t = 0 with ``method`` (``records.Method``), record the observed
@@ -24,40 +25,18 @@ from numba import njit, typeof
 from numba.core.types import WrapperAddressProtocol
 
 from .jit import JIT
-from .records import KIND_DP5, KIND_RKN4, KIND_VERLET, Steps
-from .rkloop import rk_integrate
+from .records import KIND_DP5, KIND_RKN4, KIND_VERLET
+from .rkloop import rk_kernel
 from .verlet import verlet_integrate
 
-
-@njit(**JIT)
-def _steps(params):
-    """DP5's and RKN4's params = [rtol, atol, first_step, fixed_step (0: adaptive), relaxed_lag,
-    relaxed_factor, window_lag (lags 0: off)] as ``records.Steps``."""
-    return Steps(params[0], params[1], params[2], params[3], int(params[4]), params[5], int(params[6]))
-
-
-@njit(**JIT)
-def dp5_chain(method, model, run, state, out):
-    """DP5 on the paper's chain (elastic, unloaded: ``forces.accelerations`` with ``general`` False)."""
-    return rk_integrate(KIND_DP5, False, _steps(method.params), model, run, state, out)
-
-
-@njit(**JIT)
-def dp5_chain_general(method, model, run, state, out):
-    """DP5 with real contacts (a static load, viscoelastic damping)."""
-    return rk_integrate(KIND_DP5, True, _steps(method.params), model, run, state, out)
-
-
-@njit(**JIT)
-def rkn4_chain(method, model, run, state, out):
-    """RKN4(3) on the paper's chain."""
-    return rk_integrate(KIND_RKN4, False, _steps(method.params), model, run, state, out)
-
-
-@njit(**JIT)
-def rkn4_chain_general(method, model, run, state, out):
-    """RKN4(3) with a static load (RKN4 refuses damping: its forces may not read velocities)."""
-    return rk_integrate(KIND_RKN4, True, _steps(method.params), model, run, state, out)
+#: DP5 on the paper's chain (elastic, unloaded: ``forces.accelerations`` with ``general`` False).
+dp5_chain = rk_kernel(KIND_DP5, False)
+#: DP5 with real contacts (a static load, viscoelastic damping).
+dp5_chain_general = rk_kernel(KIND_DP5, True)
+#: RKN4(3) on the paper's chain.
+rkn4_chain = rk_kernel(KIND_RKN4, False)
+#: RKN4(3) with a static load (RKN4 refuses damping: its forces may not read velocities).
+rkn4_chain_general = rk_kernel(KIND_RKN4, True)
 
 
 @njit(**JIT)

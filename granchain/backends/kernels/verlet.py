@@ -59,7 +59,7 @@ def _hermite_force(j, x_old, v_old, x, v, h, theta, c, p, o):
 
 @njit(**JIT_INLINE)
 def verlet_integrate(general, h, model, run, state, out):
-    """Fixed-step velocity Verlet with step ``h``; the contract of ``rkloop.rk_integrate`` (``model``,
+    """Fixed-step velocity Verlet with step ``h``; the contract of the entry points of ``dispatch`` (``model``,
     ``run``, ``state``, ``out``: the records of ``records``).
 
     ``general`` is a compile-time constant of the entry point that inlines this (``dispatch.verlet_chain``
