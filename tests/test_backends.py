@@ -31,7 +31,6 @@ import inspect
 import json
 import os
 import pkgutil
-import re
 import shutil
 import subprocess
 import sys

@@ -18,7 +18,7 @@ from numba import njit
 
 from . import dp5, rkn4
 from .forces import contact_force, force_rate, law_force
-from .jit import JIT, JIT_INLINE
+from .jit import JIT_INLINE, JIT_INTERNAL
 from .records import KIND_RKN4
 
 #: What :func:`first_root` follows across a step: the acceleration of a granule (its velocity
@@ -29,7 +29,7 @@ ROOT_APPROACH = 1
 ROOT_FORCE_RATE = 2
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def weights(method, theta, Qx, Qv):
     """Dense-output weights at t + theta h: positions x + h sum_s Kx[s] Qx[s], velocities
     v + h sum_s Kv[s] Qv[s]. DP5 has one set (``Qv`` is ``Qx``: filled once); RKN4 its Hermite pair
@@ -40,7 +40,7 @@ def weights(method, theta, Qx, Qv):
         dp5.dense_weights(theta, Qx)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_value(y0, K, k, h, Q):
     """y_k(t + theta h) = y0 + h sum_s K[s, k] Q[s], Q the weights at theta (:func:`weights`)."""
     acc = 0.0
@@ -49,14 +49,14 @@ def dense_value(y0, K, k, h, Q):
     return y0 + h * acc
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_compression(j, x, Kx, h, Q):
     """Compression x_j - x_{j+1} of contact j from the dense-output positions at the time whose
     weights ``Q`` holds (:func:`weights` already called)."""
     return dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_force(j, step, fm, Q, Qv):
     """The force of contact j by the chain's law (``forces.law_force``: its static overlap included, and
     its rate of compression for a viscoelastic law) from the dense output of ``step``
@@ -70,7 +70,7 @@ def dense_force(j, step, fm, Q, Qv):
     return law_force(d, w, c[j], p)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     """Acceleration of granule k at t + theta h from the dense output of ``step`` (``records.Dense``),
     forces from ``fm`` (``records.Forces``; the dynamic forces of ``forces.accelerations``: each
@@ -101,7 +101,7 @@ def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     return (left - right) * inv_m[k]
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def root_function(method, what, i, theta, step, fm, Q, Qv):
     """The followed function at t + theta h on the dense output (weights ``Q`` for positions, ``Qv``
     for velocities, see :func:`weights`): the acceleration of granule i, the relative velocity
@@ -120,7 +120,7 @@ def root_function(method, what, i, theta, step, fm, Q, Qv):
     return dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def first_root(method, what, i, f01, step, fm, Q, Qv):
     """First theta in [0, 1] where the followed function (f01 = its values (+ at 0, <= 0 at 1)) stops
     being positive: a granule's velocity maximum (``ROOT_ACCELERATION``) or a contact's compression
@@ -169,7 +169,7 @@ def falls(f0, f1):
     return (f0 > 0.0) & (f1 <= 0.0)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def hermite_max_estimate(d0, w0, d1, w1, h):
     """The cubic Hermite interpolant of the compression through (d0, w0) and (d1, w1) over a step h,
     at the zero of the linearly interpolated relative velocity w (w0 > 0 >= w1): an estimate of the

@@ -20,5 +20,11 @@ JIT = dict(
 #: array, see ``_common.borrowed``): per call more than the arithmetic of the small helpers.
 JIT_INLINE = dict(JIT, inline="always")
 
+#: Same flags, for the helpers that only compiled code calls: without the CPython and C wrappers Numba
+#: generates for every compiled function so that Python (or a function pointer) can call it. For a
+#: helper taking records of arrays the CPython wrapper's unboxing is more code than the helper, and
+#: Numba lowers it and LLVM optimises and compiles it on the first run like any other code.
+JIT_INTERNAL = dict(JIT, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+
 #: Same flags plus threading, for the ensemble loop (``numba.prange``).
 JIT_PARALLEL = dict(JIT, parallel=True)
