@@ -15,9 +15,12 @@ JIT = dict(
 )
 
 #: Same flags, inlined into the caller at Numba-IR level: for the helpers called every step of an
-#: integrator's loop. Numba does not let LLVM inline across separately compiled functions, and a call
-#: passes each array as seven scalars (plus a reference-count increment and decrement for an owning
-#: array, see ``_common.borrowed``): per call more than the arithmetic of the small helpers.
+#: integrator's loop (a call passes each array as seven scalars, plus a reference-count increment and
+#: decrement for an owning array, see ``memory.borrowed``), and for helpers whose arguments are
+#: constants where they are called (Numba prunes the branches those decide in the inlined copy). Each
+#: inlined copy costs the first run Numba's front end again (IR-inlining the root search's helpers
+#: cost more compilation than it saved); LLVM also inlines small compiled functions, whose code Numba
+#: links into their callers'.
 JIT_INLINE = dict(JIT, inline="always")
 
 #: Same flags, for the helpers that only compiled code calls: without the CPython and C wrappers Numba
