@@ -71,6 +71,43 @@ def test_simulate_and_an_ensemble_share_the_compiled_kernel():
     assert used == {"dp5_chain": 1, "integrate_batch": 1}
 
 
+CACHE_PROBE = textwrap.dedent(
+    """
+    import json
+    from numba.core import event
+    compiled = []
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            compiled.append(ev.data["dispatcher"].py_func.__qualname__)
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", Listener())
+    import granchain as gc
+    small = gc.decorated([0.05, 0.3, 0.012])
+    gc.simulate(small)
+    gc.simulate(small.with_dissipation(0.05))
+    gc.run_ensemble(6, realizations=2, progress=False)
+    print(json.dumps(compiled))
+    """
+)
+
+
+def test_a_second_process_compiles_nothing():
+    """The kernels are specialised by closures (the Runge-Kutta entry points on the method and the model
+    class, the root searches on the function followed, the force routine's call on the model class) and
+    the ensemble kernel takes the entry point as a first-class function: Numba must still find all of
+    them in its on-disk cache in the next process (it keys a closure on the values of its variables). A
+    second process running a pulse, a damped pulse and an ensemble of the paper's two chains compiles
+    no function at all (a cache miss would cost every CLI start and Dask worker its compilation)."""
+    runs = [subprocess.run([sys.executable, "-c", CACHE_PROBE], capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    compiled = json.loads(runs[1].stdout.splitlines()[-1])
+    assert compiled == [], f"compiled again in a second process: {sorted(set(compiled))}"
+
+
 def test_a_long_windowed_chain_carries_the_solitary_wave():
     """20,000 granules with the trailing window (its cuts shift the stage arrays over the window only,
     the peak search visits only the observed granules inside it, and behind the solitary wave, where
