@@ -14,6 +14,7 @@ quintic Hermite pair (``rkn4.hermite_weights``).
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from . import dp5, rkn4
@@ -186,13 +187,17 @@ def first_root(method, what, i, f01, step, fm, Q, Qv):
     whole interval and the first zero is wanted).
 
     Inlined into the step loop, where ``what`` is a constant: a call of the search compiled for it
-    (:func:`_root_search`), specialised on the literal ``method``.
+    (:func:`_root_search`). The method reaches it as a run-time value (``method`` is a constant in the
+    step loop, which Numba would pass on as a literal): one search serves DP5 and RKN4, compiled once
+    for a run that uses both (the paper's ensembles), and its dense output tests the method at each
+    evaluation, a branch always taken the same way.
     """
+    kind = np.int64(method)
     if what == ROOT_ACCELERATION:
-        return _acceleration_root(method, i, f01, step, fm, Q, Qv)
+        return _acceleration_root(kind, i, f01, step, fm, Q, Qv)
     if what == ROOT_APPROACH:
-        return _approach_root(method, i, f01, step, fm, Q, Qv)
-    return _force_rate_root(method, i, f01, step, fm, Q, Qv)
+        return _approach_root(kind, i, f01, step, fm, Q, Qv)
+    return _force_rate_root(kind, i, f01, step, fm, Q, Qv)
 
 
 @njit(**JIT_INLINE)
