@@ -17,7 +17,7 @@ import numpy as np
 from ..model.contacts import PowerLaw, Viscoelastic
 from . import Backend, aligned_outputs, batch_chain, effective_integrator
 from .kernels.batch import integrate_batch, row_records, thread_sums
-from .kernels.dispatch import chain_kernel, kernel_function
+from .kernels.dispatch import chain_kernel, integrate_chain, kernel_function
 from .kernels.forces import power_code
 from .kernels.records import (
     INFO_SIZE,
@@ -112,7 +112,7 @@ class NumbaBackend(Backend):
         run = run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed)
         out = outputs(chain.observed.size, t_grid.size, chain.size, run.contacts.size)
         model = model_record(chain)
-        status = chain_kernel(method.kind, model.params)(method, model, run, State(x, v), out)
+        status = integrate_chain(method, model, run, State(x, v), out)
         return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f, out.grid_c
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
