@@ -31,7 +31,6 @@ import inspect
 import json
 import os
 import pkgutil
-import re
 import shutil
 import subprocess
 import sys
@@ -357,27 +356,32 @@ def long_signatures(functions: dict, limit: int = MAX_POSITIONAL) -> dict:
 
 
 #: The compiled entry points: what the Numba backend calls (one chain, a batch) and the per-method
-#: kernels ``dispatch.chain_kernel`` picks for a chain (one per method and model class), down to the step loops. These are the
+#: kernels ``dispatch.chain_kernel`` picks for a chain (one per method and model class; the
+#: Runge-Kutta ones made by ``rkloop.rk_kernel``, which hold their step loop). These are the
 #: signatures a new physics parameter used to be threaded through. (The small inlined helpers
 #: below them, e.g. the Runge-Kutta stages and error ratios over a window's arrays, take their
 #: arrays one by one: they are the loops' bodies, not seams.)
-CHAIN_KERNELS = ("dispatch.dp5_chain", "dispatch.dp5_chain_general", "dispatch.rkn4_chain", "dispatch.rkn4_chain_general",
-                 "dispatch.verlet_chain", "dispatch.verlet_chain_general")
-ENTRY_POINTS = CHAIN_KERNELS + ("batch.integrate_batch", "rkloop.rk_integrate", "rkloop._rk_loop", "verlet.verlet_integrate")
+CHAIN_KERNELS = ("dp5_chain", "dp5_chain_general", "rkn4_chain", "rkn4_chain_general", "verlet_chain",
+                 "verlet_chain_general")
+ENTRY_POINTS = ("batch.integrate_batch", "verlet.verlet_integrate")
 
 
 def test_no_compiled_entry_point_takes_more_than_8_positional_parameters():
     """Kernels take grouped records (``records``), not long positional lists: every compiled entry
-    point (:data:`ENTRY_POINTS`) takes at most 8 positional parameters (they took 21-37 before the
-    records). Also checks that every kernel ``dispatch`` can reach is listed."""
+    point (:data:`CHAIN_KERNELS`, :data:`ENTRY_POINTS`) takes at most 8 positional parameters (they
+    took 21-37 before the records). Also checks that every kernel ``dispatch.chain_kernel`` can pick
+    is listed."""
     from granchain.backends import kernels
+    from granchain.backends.kernels import dispatch
+    from granchain.backends.kernels.records import KIND_DP5, KIND_RKN4, KIND_VERLET, Params
 
     functions = compiled_functions(kernels)
     assert len(functions) >= 40
     entry = {f"granchain.backends.kernels.{name}": functions[f"granchain.backends.kernels.{name}"] for name in ENTRY_POINTS}
-    source = "".join(inspect.getsource(functions[f"granchain.backends.kernels.{name}"].py_func) for name in CHAIN_KERNELS)
-    dispatched = set(re.findall(r"(\w+_integrate)\(", source))
-    assert dispatched == {"rk_integrate", "verlet_integrate"}, dispatched
+    entry.update({f"granchain.backends.kernels.dispatch.{name}": getattr(dispatch, name) for name in CHAIN_KERNELS})
+    picked = {dispatch.chain_kernel(kind, Params(2.5, 1, False, gamma, load))
+              for kind in (KIND_DP5, KIND_RKN4, KIND_VERLET) for gamma, load in ((0.0, 0.0), (0.1, 0.0), (0.0, 0.1))}
+    assert picked == {getattr(dispatch, name) for name in CHAIN_KERNELS}
     offenders = long_signatures(entry)
     assert not offenders, (f"{len(offenders)} compiled functions take more than {MAX_POSITIONAL} positional parameters "
                            "(group them into records of granchain.backends.kernels.records): "
@@ -409,15 +413,15 @@ MODEL_FIELD_SCRIPT = textwrap.dedent(
     import numpy as np
     import granchain as gc
     from granchain.backends import numba_backend
-    from granchain.backends.kernels import peaks, records, rkloop, verlet
+    from granchain.backends.kernels import dispatch, peaks, records, rkloop, verlet
     from granchain.backends.kernels.forces import power_code
 
-    assert numba.config.DISABLE_JIT and inspect.isfunction(rkloop.rk_integrate)
+    assert numba.config.DISABLE_JIT and inspect.isfunction(dispatch.dp5_chain)
     PROBE = 0.125
     seen = []
 
-    # Observe the model's parameters where the step loops hand them on (rkloop._rk_loop and
-    # verlet.verlet_integrate call peaks.initial_force_records(x, v, model, g, out, contacts)).
+    # Observe the model's parameters where the step loops hand them on (the kernels of rkloop.rk_kernel
+    # and verlet.verlet_integrate call peaks.initial_force_records(x, v, model, g, out, contacts)).
     def observed(original):
         def initial_force_records(x, v, model, g, out, contacts):
             seen.append(getattr(model.params, "probe", "absent"))
@@ -508,7 +512,7 @@ def test_a_new_model_field_reaches_the_step_loop_untouched(model_field_run, inte
     run goes through the real paths (``simulate`` -> backend -> ``dispatch.chain_kernel``'s kernel -> the
     method's step loop; ``run_ensemble`` -> backend -> ``batch.integrate_batch`` -> a Model per
     realisation -> the same) and a hook on ``peaks.initial_force_records``, which the step loops of
-    DP5, RKN4 (``rkloop._rk_loop``) and Verlet call with the Model record they hold, must see the
+    DP5, RKN4 (``rkloop.rk_kernel``) and Verlet call with the Model record they hold, must see the
     probe's value: the field travelled through every signature on the way. The results must be bitwise those
     of the unchanged record (nothing read a field by position that the new one shifted). Tuple
     unpacking and named-tuple construction have a fixed arity in the source whether compiled or not

@@ -517,11 +517,11 @@ print(json.dumps({{"ensemble": int(ds["n_steps"].values[0, 0]), "simulate": r.n_
 
 @pytest.mark.slow
 def test_kernel_cache_follows_edits_of_the_integrator(tmp_path):
-    """``cache=True`` keys a kernel's cache on its own source file only. The ensemble kernel
-    (``backends/kernels/batch.py``) inlines ``rk_integrate`` (``backends/kernels/rkloop.py``): after an edit of
-    the integrator alone, a stale cache would make ``run_ensemble`` integrate with the old code
-    while ``simulate`` uses the new one. On a copy of the package: warm the cache, change the
-    step-size controller's safety factor, and check that both still take the same steps."""
+    """``cache=True`` keys a kernel's cache on its own source file only. The Runge-Kutta entry point
+    (``backends/kernels/rkloop.py``) inlines RKN4's stages and error estimate (``backends/kernels/rkn4.py``):
+    after an edit of the method alone, a stale cache would integrate with the old code. On a copy of
+    the package: warm the cache, change a weight of RKN4's error estimate, and check that ``simulate``
+    takes other steps and that ``run_ensemble`` (which calls the same entry point) takes the same."""
     root = tmp_path / "pkg"
     shutil.copytree(Path(gc.__file__).parent, root / "granchain", ignore=shutil.ignore_patterns("__pycache__"))
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
@@ -534,10 +534,11 @@ def test_kernel_cache_follows_edits_of_the_integrator(tmp_path):
 
     before = probe()
     assert before["ensemble"] == before["simulate"]
-    dp5 = root / "granchain" / "backends" / "kernels" / "rkloop.py"
-    text = dp5.read_text()
-    assert "\nSAFETY = 0.9\n" in text, "the probe edits SAFETY = 0.9 in backends/kernels/rkloop.py: update the test"
-    dp5.write_text(text.replace("\nSAFETY = 0.9\n", "\nSAFETY = 0.8\n"))
+    rkn4 = root / "granchain" / "backends" / "kernels" / "rkn4.py"
+    text = rkn4.read_text()
+    old = "25 / 189 - 3 / 20, 1 / 20\n"
+    assert text.count(old) == 1, "the probe edits RKN4's error weight EB3 = 1 / 20 in backends/kernels/rkn4.py: update the test"
+    rkn4.write_text(text.replace(old, "25 / 189 - 3 / 20, 1 / 19\n"))
     after = probe()
     assert after["simulate"] != before["simulate"], "the edit should change the step sequence"
     assert after["ensemble"] == after["simulate"], (

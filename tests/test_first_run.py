@@ -31,32 +31,81 @@ PROBE = textwrap.dedent(
         gc.run_ensemble(6, realizations=2, progress=False, chains="decorated")
     elif job == "damped":
         gc.simulate(small.with_dissipation(0.05))
+    elif job == "shared":
+        gc.simulate(gc.effective(small))
+        gc.run_ensemble(6, realizations=2, progress=False, chains="effective")
     names = ["dp5_chain", "dp5_chain_general", "rkn4_chain", "rkn4_chain_general", "verlet_chain",
              "verlet_chain_general"]
     used = {name: len(getattr(dispatch, name).signatures) for name in names}
-    used.update({name: len(getattr(batch, name).signatures) for name in
-                 ["dp5_batch", "dp5_batch_general", "rkn4_batch", "rkn4_batch_general", "verlet_batch",
-                  "verlet_batch_general"]})
+    used["integrate_batch"] = len(batch.integrate_batch.signatures)
     print(json.dumps(used))
     """
 )
 
 
-def _compiled(job: str) -> set:
-    """The kernels holding compiled code (from the cache or compiled) after ``job`` in a fresh interpreter."""
+def _compiled(job: str) -> dict:
+    """The kernels holding compiled code (from the cache or compiled) after ``job`` in a fresh
+    interpreter, with the number of signatures each holds."""
     out = subprocess.run([sys.executable, "-c", PROBE, job], capture_output=True, text=True, check=True)
-    return {name for name, n in json.loads(out.stdout.splitlines()[-1]).items() if n > 0}
+    return {name: n for name, n in json.loads(out.stdout.splitlines()[-1]).items() if n > 0}
 
 
 def test_a_pulse_compiles_dp5_for_the_papers_chain_alone():
     """A first ``simulate`` of a decorated chain (DP5, elastic, unloaded) loads or compiles DP5's kernel
-    for the paper's chain and nothing else: not RKN4, Verlet, the real-contact loops or any ensemble
+    for the paper's chain and nothing else: not RKN4, Verlet, the real-contact loops or the ensemble
     kernel (each of which cost a newcomer's first run its compilation). A damped chain takes the
-    real-contact kernel, an ensemble of decorated chains the RKN4 ensemble kernel (its default), each
-    alone: the check can fail both ways."""
-    assert _compiled("pulse") == {"dp5_chain"}
-    assert _compiled("damped") == {"dp5_chain_general"}
-    assert _compiled("ensemble") == {"rkn4_batch"}
+    real-contact kernel, an ensemble of decorated chains RKN4's kernel (its default) and the ensemble
+    kernel, which calls it through its address: the check can fail both ways. Each once: one signature
+    (a second, e.g. for read-only arrays, would be a second compilation of the whole step loop)."""
+    assert _compiled("pulse") == {"dp5_chain": 1}
+    assert _compiled("damped") == {"dp5_chain_general": 1}
+    assert _compiled("ensemble") == {"rkn4_chain": 1, "integrate_batch": 1}
+
+
+def test_simulate_and_an_ensemble_share_the_compiled_kernel():
+    """An ensemble of effective chains after a ``simulate`` of one (both DP5, the paper's model) uses
+    the entry point ``simulate`` compiled, not a second specialisation of it: the arrays a chain holds
+    are read-only and an ensemble's are not, and the kernels get both as writable C arrays."""
+    out = subprocess.run([sys.executable, "-c", PROBE, "shared"], capture_output=True, text=True, check=True)
+    used = {name: n for name, n in json.loads(out.stdout.splitlines()[-1]).items() if n > 0}
+    assert used == {"dp5_chain": 1, "integrate_batch": 1}
+
+
+CACHE_PROBE = textwrap.dedent(
+    """
+    import json
+    from numba.core import event
+    compiled = []
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            compiled.append(ev.data["dispatcher"].py_func.__qualname__)
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", Listener())
+    import granchain as gc
+    small = gc.decorated([0.05, 0.3, 0.012])
+    gc.simulate(small)
+    gc.simulate(small.with_dissipation(0.05))
+    gc.run_ensemble(6, realizations=2, progress=False)
+    print(json.dumps(compiled))
+    """
+)
+
+
+def test_a_second_process_compiles_nothing():
+    """The kernels are specialised by closures (the Runge-Kutta entry points on the method and the model
+    class, the root searches on the function followed, the force routine's call on the model class) and
+    the ensemble kernel takes the entry point as a first-class function: Numba must still find all of
+    them in its on-disk cache in the next process (it keys a closure on the values of its variables). A
+    second process running a pulse, a damped pulse and an ensemble of the paper's two chains compiles
+    no function at all (a cache miss would cost every CLI start and Dask worker its compilation)."""
+    runs = [subprocess.run([sys.executable, "-c", CACHE_PROBE], capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    compiled = json.loads(runs[1].stdout.splitlines()[-1])
+    assert compiled == [], f"compiled again in a second process: {sorted(set(compiled))}"
 
 
 def test_a_long_windowed_chain_carries_the_solitary_wave():

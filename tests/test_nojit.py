@@ -28,10 +28,10 @@ SCRIPT = textwrap.dedent(
     import numba
     import numpy as np
     import granchain as gc
-    from granchain.backends.kernels import forces, rkloop, verlet
+    from granchain.backends.kernels import dispatch, forces, rkloop, verlet
 
     assert numba.config.DISABLE_JIT
-    for f in (rkloop.rk_integrate, verlet.verlet_integrate, forces.accelerations):
+    for f in (dispatch.dp5_chain, rkloop.rk_kernel(0, False), verlet.verlet_integrate, forces.accelerations):
         assert inspect.isfunction(f), type(f)
 
     chains = {chains}
@@ -55,9 +55,9 @@ def nojit_results(run_without_jit):
 
 
 def test_compiled_in_this_process():
-    from granchain.backends.kernels import rkloop
+    from granchain.backends.kernels import dispatch
 
-    assert hasattr(rkloop.rk_integrate, "py_func")  # a Numba dispatcher here
+    assert hasattr(dispatch.dp5_chain, "py_func")  # a Numba dispatcher here
 
 
 @pytest.mark.parametrize("integrator", INTEGRATORS)

@@ -4,6 +4,10 @@ This is the only place that knows both sides: it turns an integrator's settings 
 ``records.Method`` (kind and float64 params), a chain into a ``records.Model``, the run controls into
 a ``records.Run``, allocates the outputs and calls the entry point ``kernels.dispatch.chain_kernel``
 picks (one chain) or ``kernels.batch.integrate_batch`` with it (a parallel batch of chains of one size).
+
+Every array the kernels read is passed writable and C-contiguous (:func:`kernel_array`; a chain's own
+arrays are read-only): Numba compiles a function once per combination of argument types, read-only
+being one, so ``simulate`` and the ensembles share one compiled entry point per method and model class.
 """
 
 from __future__ import annotations
@@ -12,8 +16,8 @@ import numpy as np
 
 from ..model.contacts import PowerLaw, Viscoelastic
 from . import Backend, aligned_outputs, batch_chain, effective_integrator
-from .kernels.batch import BATCH_KERNELS, thread_sums
-from .kernels.dispatch import chain_kernel
+from .kernels.batch import integrate_batch, row_records, thread_sums
+from .kernels.dispatch import chain_kernel, integrate_chain, kernel_function
 from .kernels.forces import power_code
 from .kernels.records import (
     INFO_SIZE,
@@ -31,6 +35,12 @@ from .kernels.records import (
     Sums,
     Tally,
 )
+
+
+def kernel_array(a, dtype=float) -> np.ndarray:
+    """``a`` as the kernels take their arrays: ``dtype``, C-contiguous and writable (a copy only if it is
+    not already), so that every call has the argument types of the one compiled signature."""
+    return np.require(a, dtype, "CAW")
 
 
 def _rk_params(integ) -> np.ndarray:
@@ -66,16 +76,16 @@ def model_params(chain) -> Params:
 
 def model_record(chain) -> Model:
     """The kernel's ``Model`` for ``chain``: its arrays and :func:`model_params`."""
-    return Model(chain.masses, chain.stiffness, model_params(chain))
+    return Model(kernel_array(chain.masses), kernel_array(chain.stiffness), model_params(chain))
 
 
 def run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed=None) -> Run:
     """The kernel's ``Run``: what to record (``chain``'s observed granules, velocities on ``t_grid``, the
     forces of the contacts ``sensed`` on it) and when to stop (``t_max``, or the pulse's exit with
     ``stop_at_exit``; ``controls``: :class:`granchain.RunControls`)."""
-    return Run(chain.observed, t_grid, float(t_max), bool(stop_at_exit), controls.exit_margin, controls.max_steps,
-               controls.peak_rtol, no_contacts() if sensed is None else np.ascontiguousarray(sensed, dtype=np.int64),
-               no_windows())
+    return Run(kernel_array(chain.observed, np.int64), kernel_array(t_grid), float(t_max), bool(stop_at_exit),
+               controls.exit_margin, controls.max_steps, controls.peak_rtol,
+               no_contacts() if sensed is None else kernel_array(sensed, np.int64), no_windows())
 
 
 def no_contacts() -> np.ndarray:
@@ -107,7 +117,7 @@ class NumbaBackend(Backend):
         run = run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed)
         out = outputs(chain.observed.size, t_grid.size, chain.size, run.contacts.size)
         model = model_record(chain)
-        status = chain_kernel(method.kind, model.params)(method, model, run, State(x, v), out)
+        status = integrate_chain(method, model, run, State(x, v), out)
         return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f, out.grid_c
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
@@ -120,23 +130,24 @@ class NumbaBackend(Backend):
         method = method_record(effective_integrator(integrator, first))
         lags, sum_a, sum_a2 = aligned_outputs(out, observed.shape[0])
         limits = np.ascontiguousarray(np.broadcast_to(np.asarray(t_max, dtype=float), masses.shape[:1]))
-        ends = no_windows() if pulse_end is None else np.ascontiguousarray(pulse_end, dtype=float)
-        run = Run(observed, t_grid, float(limits.max()), first.ends_at_exit, controls.exit_margin, controls.max_steps,
-                  controls.peak_rtol, no_contacts(), ends)
+        ends = no_windows() if pulse_end is None else kernel_array(pulse_end)
+        run = Run(kernel_array(observed, np.int64), kernel_array(t_grid), float(limits.max()), first.ends_at_exit,
+                  controls.exit_margin, controls.max_steps, controls.peak_rtol, no_contacts(), ends)
         # Dynamic scheduling, one realisation at a time. Realisations differ in cost by up to 16x
         # (N = 6 decorated chains), and Numba's default static split (each thread a contiguous
         # half of the batch) left a thread idle for 1.2-3.6 % of a 1000-realisation chunk of the
         # paper's set (computed from its per-realisation step counts; 0.1 % dynamic). Results do not
         # change: realisations are independent and the sums are integers (test_ensemble). The
         # per-thread sums are allocated here, not in the kernel (see thread_sums).
+        params = model_params(first)
+        batch = Batch(kernel_array(masses), kernel_array(stiffness), initial_velocity, params, limits)
+        rows = Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
+                    out["status"], out["energy_error"], out["n_steps"], out["t_end"],
+                    out["dissipated_energy"] if "dissipated_energy" in out else np.zeros(masses.shape[0]))
+        kernel = kernel_function(chain_kernel(method.kind, params), *row_records(batch, method, run, rows))
         with numba.parallel_chunksize(1):
-            params = model_params(first)
-            BATCH_KERNELS[chain_kernel(method.kind, params)](
-                Batch(masses, stiffness, initial_velocity, params, limits), method, run,
-                Tally(contacts, float(scale), lags),
-                Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
-                     out["status"], out["energy_error"], out["n_steps"], out["t_end"],
-                     out["dissipated_energy"] if "dissipated_energy" in out else np.zeros(masses.shape[0])),
+            integrate_batch(
+                kernel, batch, method, run, Tally(contacts, float(scale), lags), rows,
                 Sums(out["sum_v"], out["sum_v2"], out["sum_wall"], out["n_valid"], sum_a, sum_a2),
                 thread_sums(numba.get_num_threads(), t_grid.size, observed.shape[0], lags.size),
             )

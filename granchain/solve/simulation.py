@@ -319,8 +319,10 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     from ..backends import numba_backend  # (imported on first use: importing granchain does not load the backends)
 
     dissipated = float(info[INFO_DISSIPATED])
-    e1 = final_energy(x, v, chain.masses, chain.stiffness, numba_backend.model_params(chain), info) + dissipated
-    p1 = total_momentum(v, chain.masses)
+    # (the chain's arrays as the kernels take them, writable: the types the ensemble kernel compiles these for)
+    masses, stiffness = numba_backend.kernel_array(chain.masses), numba_backend.kernel_array(chain.stiffness)
+    e1 = final_energy(x, v, masses, stiffness, numba_backend.model_params(chain), info) + dissipated
+    p1 = total_momentum(v, masses)
     wall = chain.wall
     return PulseResult(
         chain=chain,

@@ -13,13 +13,14 @@ it validates, allocates, fills the records and calls the kernel :func:`~granchai
 - ``dense``: dense output of the Runge-Kutta steps and the roots found on it;
 - ``rkloop``: the adaptive Runge-Kutta step loop; ``dp5`` and ``rkn4``: the tableaux it runs;
 - ``verlet``: velocity Verlet;
-- ``dispatch``: the single-chain entry point; ``batch``: the parallel ensemble driver;
+- ``dispatch``: the single-chain entry points; ``batch``: the parallel ensemble driver, which calls them
+  through their addresses;
   ``aligned``: the aligned pulse's sums;
 - ``memory``: borrowed views; ``jit``: the compilation flags.
 
 Numba's on-disk cache (``cache=True``) checks only the source file of the
 function it compiles, but the kernels inline each other across files (the
-ensemble kernel inlines the DP5 kernel, which inlines the force routines). So
+step loop inlines the stages, which inline the force routines). So
 the cache is keyed here on all kernel sources together: when any of them (or
 Numba's version) changes, the cached machine code of every kernel is dropped.
 """

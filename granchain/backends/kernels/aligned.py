@@ -18,10 +18,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import JIT
+from .jit import JIT, JIT_INTERNAL
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def grid_value(t_grid, grid_v, q, t):
     """v_q(t) interpolated from grid_v[:, q] (cubic Lagrange on uniform or non-uniform grids)."""
     T = t_grid.shape[0]

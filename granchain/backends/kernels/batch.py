@@ -4,6 +4,13 @@ Realisation r of a batch is integrated by the single-chain entry point of ``disp
 ``granchain.simulate`` runs for the same chain (an argument of the kernel), on the same chain arrays: per-realisation results are
 bitwise independent of how realisations are grouped, and equal to ``simulate``.
 
+The entry point is a first-class function (``dispatch.kernel_function``): its machine code, compiled (or
+loaded from the cache) once for ``simulate`` and ensembles alike, is called through its address. The
+ensemble kernel is then one compiled function for every method and model class, and small: called by
+name, the entry point's code (the whole step loop) was linked into the ensemble kernel and optimised and
+compiled by LLVM again, four times over (the parallel loop's body, its two wrappers and the kernel
+itself), which was most of an ensemble's first compilation.
+
 The ensemble-averaged pulse <v_k(t)> is accumulated as running sums in fixed
 point: each velocity is rounded to a multiple of 2^-bits and summed as an
 int64. Integer addition is associative, so the sums (and the mean) are bitwise
@@ -20,9 +27,7 @@ from numba import njit, prange
 from ..._status import SUCCESS
 from .aligned import accumulate_aligned
 from .forces import final_energy, impulse_energy
-from .dispatch import (dp5_chain, dp5_chain_general, rkn4_chain, rkn4_chain_general, verlet_chain,
-                       verlet_chain_general)
-from .jit import JIT, JIT_INLINE, JIT_PARALLEL
+from .jit import JIT, JIT_PARALLEL
 from .records import (
     INFO_DISSIPATED,
     INFO_SIZE,
@@ -86,14 +91,12 @@ def thread_sums(n_threads, T, K, L):
                     np.zeros((n_threads, L, K), dtype=np.int64), np.zeros((n_threads, L, K), dtype=np.int64))
 
 
-# Inlined into one parallel kernel per single-chain entry point (below), which it calls as a global:
-# a first-class function passed to a compiled function is a run-time object, whose compiled code Numba
-# cannot cache across processes; and each ensemble kernel is compiled only when a run uses it.
-@njit(**JIT_INLINE)
+@njit(**JIT_PARALLEL)
 def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     """Integrate realisations r = 0..R-1 (rows of ``batch``, ``records.Batch``: each struck at granule 1
     with its ``initial_velocity``) with ``method`` by the single-chain entry point ``kernel``
-    (``dispatch.chain_kernel``: one compiled specialisation of this kernel per entry point used), recording what ``run`` asks (its
+    (``dispatch.kernel_function`` of the entry point ``dispatch.chain_kernel`` picks, for the records of
+    :func:`row_records`), recording what ``run`` asks (its
     ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``, ``pulse_end``; the run stops at the
     pulse's exit with ``run.stop_at_exit``, else, successfully, at the row's ``batch.t_max[r]`` (also its
     limit otherwise; ``run.t_max`` is not read): a precompressed chain,
@@ -172,43 +175,15 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
                 sum_a2[g, q] += al2[th, g, q]
 
 
-@njit(**JIT_PARALLEL)
-def dp5_batch(batch, method, run, tally, rows, sums, partials):
-    """:func:`integrate_batch` with ``dispatch.dp5_chain``."""
-    integrate_batch(dp5_chain, batch, method, run, tally, rows, sums, partials)
-
-
-@njit(**JIT_PARALLEL)
-def dp5_batch_general(batch, method, run, tally, rows, sums, partials):
-    """:func:`integrate_batch` with ``dispatch.dp5_chain_general``."""
-    integrate_batch(dp5_chain_general, batch, method, run, tally, rows, sums, partials)
-
-
-@njit(**JIT_PARALLEL)
-def rkn4_batch(batch, method, run, tally, rows, sums, partials):
-    """:func:`integrate_batch` with ``dispatch.rkn4_chain``."""
-    integrate_batch(rkn4_chain, batch, method, run, tally, rows, sums, partials)
-
-
-@njit(**JIT_PARALLEL)
-def rkn4_batch_general(batch, method, run, tally, rows, sums, partials):
-    """:func:`integrate_batch` with ``dispatch.rkn4_chain_general``."""
-    integrate_batch(rkn4_chain_general, batch, method, run, tally, rows, sums, partials)
-
-
-@njit(**JIT_PARALLEL)
-def verlet_batch(batch, method, run, tally, rows, sums, partials):
-    """:func:`integrate_batch` with ``dispatch.verlet_chain``."""
-    integrate_batch(verlet_chain, batch, method, run, tally, rows, sums, partials)
-
-
-@njit(**JIT_PARALLEL)
-def verlet_batch_general(batch, method, run, tally, rows, sums, partials):
-    """:func:`integrate_batch` with ``dispatch.verlet_chain_general``."""
-    integrate_batch(verlet_chain_general, batch, method, run, tally, rows, sums, partials)
-
-
-#: The ensemble kernel of each single-chain entry point.
-BATCH_KERNELS = {dp5_chain: dp5_batch, dp5_chain_general: dp5_batch_general, rkn4_chain: rkn4_batch,
-                 rkn4_chain_general: rkn4_batch_general, verlet_chain: verlet_batch,
-                 verlet_chain_general: verlet_batch_general}
+def row_records(batch, method, run, rows):
+    """The records :func:`integrate_batch` passes to ``kernel`` for row 0 of ``batch``, as it builds
+    them in its loop (arrays of the same types, zeros): what ``dispatch.kernel_function`` compiles the
+    entry point for. (A difference in type would stop the ensemble kernel's compilation: the call
+    would not match the function's signature.)"""
+    M = batch.masses.shape[1]
+    T, K = run.t_grid.shape[0], run.observed.shape[0]
+    params = Params(*batch.params)
+    return (method, Model(batch.masses[0], batch.stiffness[0], params), run._replace(t_max=float(batch.t_max[0])),
+            State(np.zeros(M), np.zeros(M)),
+            Outputs(rows.peak_v[0], rows.peak_t[0], np.zeros((T, K)), np.zeros(M - 1), np.zeros(M - 1), np.zeros(T),
+                    np.zeros(INFO_SIZE), np.zeros((T, run.contacts.shape[0]))))

@@ -14,11 +14,12 @@ quintic Hermite pair (``rkn4.hermite_weights``).
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from . import dp5, rkn4
 from .forces import contact_force, force_rate, law_force
-from .jit import JIT, JIT_INLINE
+from .jit import JIT_INLINE, JIT_INTERNAL
 from .records import KIND_RKN4
 
 #: What :func:`first_root` follows across a step: the acceleration of a granule (its velocity
@@ -29,7 +30,7 @@ ROOT_APPROACH = 1
 ROOT_FORCE_RATE = 2
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def weights(method, theta, Qx, Qv):
     """Dense-output weights at t + theta h: positions x + h sum_s Kx[s] Qx[s], velocities
     v + h sum_s Kv[s] Qv[s]. DP5 has one set (``Qv`` is ``Qx``: filled once); RKN4 its Hermite pair
@@ -40,7 +41,7 @@ def weights(method, theta, Qx, Qv):
         dp5.dense_weights(theta, Qx)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_value(y0, K, k, h, Q):
     """y_k(t + theta h) = y0 + h sum_s K[s, k] Q[s], Q the weights at theta (:func:`weights`)."""
     acc = 0.0
@@ -49,14 +50,14 @@ def dense_value(y0, K, k, h, Q):
     return y0 + h * acc
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_compression(j, x, Kx, h, Q):
     """Compression x_j - x_{j+1} of contact j from the dense-output positions at the time whose
     weights ``Q`` holds (:func:`weights` already called)."""
     return dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_force(j, step, fm, Q, Qv):
     """The force of contact j by the chain's law (``forces.law_force``: its static overlap included, and
     its rate of compression for a viscoelastic law) from the dense output of ``step``
@@ -70,7 +71,7 @@ def dense_force(j, step, fm, Q, Qv):
     return law_force(d, w, c[j], p)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     """Acceleration of granule k at t + theta h from the dense output of ``step`` (``records.Dense``),
     forces from ``fm`` (``records.Forces``; the dynamic forces of ``forces.accelerations``: each
@@ -101,64 +102,102 @@ def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     return (left - right) * inv_m[k]
 
 
-@njit(**JIT)
-def root_function(method, what, i, theta, step, fm, Q, Qv):
-    """The followed function at t + theta h on the dense output (weights ``Q`` for positions, ``Qv``
-    for velocities, see :func:`weights`): the acceleration of granule i, the relative velocity
-    v_i - v_{i+1} of contact i, or the rate of contact i's force (``forces.force_rate``)."""
-    if what == ROOT_ACCELERATION:
-        return dense_acceleration(method, theta, i, step, fm, Q, Qv)
+@njit(**JIT_INTERNAL)
+def relative_velocity(method, theta, i, step, Q, Qv):
+    """v_i - v_{i+1} of contact i at t + theta h on the dense output of ``step`` (its compression
+    rate: the compression peaks where it falls through 0)."""
     x, v, Kx, Kv, h = step
-    if what == ROOT_FORCE_RATE:
-        dw = (dense_acceleration(method, theta, i, step, fm, Q, Qv)
-              - dense_acceleration(method, theta, i + 1, step, fm, Q, Qv))
-        c, _, p, o, _ = fm
-        d = o[i] + dense_compression(i, x, Kx, h, Q)
-        w = dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
-        return force_rate(d, w, dw, c[i], p)
     weights(method, theta, Q, Qv)
     return dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
+def dense_force_rate(method, theta, i, step, fm, Q, Qv):
+    """The rate of contact i's force (``forces.force_rate``) at t + theta h on the dense output of
+    ``step``: a viscoelastic force peaks where it falls through 0."""
+    x, v, Kx, Kv, h = step
+    dw = (dense_acceleration(method, theta, i, step, fm, Q, Qv)
+          - dense_acceleration(method, theta, i + 1, step, fm, Q, Qv))
+    c, _, p, o, _ = fm
+    d = o[i] + dense_compression(i, x, Kx, h, Q)
+    w = dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
+    return force_rate(d, w, dw, c[i], p)
+
+
+def _root_search(what):
+    """The root search of :func:`first_root` for the function followed ``what`` (``ROOT_*``): the
+    acceleration of granule i (:func:`dense_acceleration`), the relative velocity of contact i
+    (:func:`relative_velocity`) or the rate of its force (:func:`dense_force_rate`), on the dense
+    output (weights ``Q`` for positions, ``Qv`` for velocities, see :func:`weights`).
+
+    ``what`` is a constant of the search's code (this closure's variable, whose branches Numba
+    prunes): each search compiles the one function it follows. With ``what`` a literal argument, each
+    specialisation compiled the three; with ``what`` a run-time value the decorated ensembles ran ~3 %
+    slower (every peak is located by this loop; same-process timings at N = 26)."""
+
+    @njit(**JIT_INTERNAL)
+    def search(method, i, f01, step, fm, Q, Qv):
+        lo, hi = 0.0, 1.0
+        f_lo, f_hi = f01
+        theta = 0.0
+        side = 0
+        for _ in range(200):
+            if f_hi < 0.0:
+                theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+                if not (lo < theta < hi):
+                    theta = 0.5 * (lo + hi)
+            else:
+                theta = 0.5 * (lo + hi)
+            if what == ROOT_ACCELERATION:
+                f = dense_acceleration(method, theta, i, step, fm, Q, Qv)
+            elif what == ROOT_APPROACH:
+                f = relative_velocity(method, theta, i, step, Q, Qv)
+            else:
+                f = dense_force_rate(method, theta, i, step, fm, Q, Qv)
+            if f > 0.0:
+                lo, f_lo = theta, f
+                if side == -1:
+                    f_hi *= 0.5
+                side = -1
+            else:
+                hi, f_hi = theta, f
+                if side == 1:
+                    f_lo *= 0.5
+                side = 1
+            if hi - lo < 1e-14:
+                break
+        return hi
+
+    return search
+
+
+_acceleration_root = _root_search(ROOT_ACCELERATION)
+_approach_root = _root_search(ROOT_APPROACH)
+_force_rate_root = _root_search(ROOT_FORCE_RATE)
+
+
+@njit(**JIT_INLINE)
 def first_root(method, what, i, f01, step, fm, Q, Qv):
     """First theta in [0, 1] where the followed function (f01 = its values (+ at 0, <= 0 at 1)) stops
-    being positive: a granule's velocity maximum (``ROOT_ACCELERATION``) or a contact's compression
-    maximum (``ROOT_APPROACH``).
+    being positive: a granule's velocity maximum (``ROOT_ACCELERATION``), a contact's compression
+    maximum (``ROOT_APPROACH``) or its force maximum (``ROOT_FORCE_RATE``).
 
     Illinois (modified regula falsi) while the bracket has a strictly negative end; bisection
     while it ends on an exact zero (a contact that opened: the acceleration is then zero on a
     whole interval and the first zero is wanted).
 
-    ``what`` is a literal at each call site, so Numba compiles one specialisation per function
-    followed (~0.5 s each on a first run): with ``what`` a run-time value the decorated ensembles
-    ran ~3 % slower (every peak is located by this loop; same-process timings at N = 26).
+    Inlined into the step loop, where ``what`` is a constant: a call of the search compiled for it
+    (:func:`_root_search`). The method reaches it as a run-time value (``method`` is a constant in the
+    step loop, which Numba would pass on as a literal): one search serves DP5 and RKN4, compiled once
+    for a run that uses both (the paper's ensembles), and its dense output tests the method at each
+    evaluation, a branch always taken the same way.
     """
-    lo, hi = 0.0, 1.0
-    f_lo, f_hi = f01
-    theta = 0.0
-    side = 0
-    for _ in range(200):
-        if f_hi < 0.0:
-            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            if not (lo < theta < hi):
-                theta = 0.5 * (lo + hi)
-        else:
-            theta = 0.5 * (lo + hi)
-        f = root_function(method, what, i, theta, step, fm, Q, Qv)
-        if f > 0.0:
-            lo, f_lo = theta, f
-            if side == -1:
-                f_hi *= 0.5
-            side = -1
-        else:
-            hi, f_hi = theta, f
-            if side == 1:
-                f_lo *= 0.5
-            side = 1
-        if hi - lo < 1e-14:
-            break
-    return hi
+    kind = np.int64(method)
+    if what == ROOT_ACCELERATION:
+        return _acceleration_root(kind, i, f01, step, fm, Q, Qv)
+    if what == ROOT_APPROACH:
+        return _approach_root(kind, i, f01, step, fm, Q, Qv)
+    return _force_rate_root(kind, i, f01, step, fm, Q, Qv)
 
 
 @njit(**JIT_INLINE)
@@ -169,7 +208,7 @@ def falls(f0, f1):
     return (f0 > 0.0) & (f1 <= 0.0)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def hermite_max_estimate(d0, w0, d1, w1, h):
     """The cubic Hermite interpolant of the compression through (d0, w0) and (d1, w1) over a step h,
     at the zero of the linearly interpolated relative velocity w (w0 > 0 >= w1): an estimate of the

@@ -5,12 +5,12 @@ among them.
 picks, so a realisation of an ensemble is integrated by exactly the code (and to the bit) that
 ``simulate`` uses. Each entry point is its own compiled function and Numba compiles a function on
 its first call: a run compiles the one kernel it uses (a first ``granchain pulse`` compiles DP5 for
-the paper's chain, not RKN4, Verlet or the real-contact loops). Each entry point has its own
-ensemble kernel (``batch.BATCH_KERNELS``), compiled only when an ensemble uses it. (The entry point
-cannot be an argument of a compiled function: a first-class function is then a run-time object,
-and Numba does not cache such code across processes.) A new compiled method adds its kind
-(``records.KIND_*``), an entry point here, its ensemble kernel in ``batch`` and its binding in
-``granchain.backends.numba_backend``.
+the paper's chain, not RKN4, Verlet or the real-contact loops). The Runge-Kutta entry points are
+made by ``rkloop.rk_kernel``, with the method and the model class constants of their code. The
+ensemble kernel calls an entry point through its address (:func:`kernel_function`), so that one
+ensemble kernel serves every entry point and the entry point's machine code is the very code
+``simulate`` runs, compiled once. A new compiled method adds its kind (``records.KIND_*``), an entry
+point here and its binding in ``granchain.backends.numba_backend``.
 
 The common contract of every single-chain kernel ``kernel(method, model, run, state, out)``:
 integrate ``model`` from ``state`` at t = 0 with ``method`` (``records.Method``), record the observed
@@ -21,52 +21,31 @@ when the chain ends in a wall, fill ``info`` (``records.INFO_*``) and return a s
 
 from __future__ import annotations
 
-from numba import njit
+from numba import njit, typeof
+from numba.core.types import WrapperAddressProtocol
 
-from .jit import JIT
-from .records import KIND_DP5, KIND_RKN4, KIND_VERLET, Steps
-from .rkloop import rk_integrate
+from .jit import JIT, JIT_ENTRY
+from .records import KIND_DP5, KIND_RKN4, KIND_VERLET
+from .rkloop import rk_kernel
 from .verlet import verlet_integrate
 
-
-@njit(**JIT)
-def _steps(params):
-    """DP5's and RKN4's params = [rtol, atol, first_step, fixed_step (0: adaptive), relaxed_lag,
-    relaxed_factor, window_lag (lags 0: off)] as ``records.Steps``."""
-    return Steps(params[0], params[1], params[2], params[3], int(params[4]), params[5], int(params[6]))
-
-
-@njit(**JIT)
-def dp5_chain(method, model, run, state, out):
-    """DP5 on the paper's chain (elastic, unloaded: ``forces.accelerations`` with ``general`` False)."""
-    return rk_integrate(KIND_DP5, False, _steps(method.params), model, run, state, out)
+#: DP5 on the paper's chain (elastic, unloaded: ``forces.accelerations`` with ``general`` False).
+dp5_chain = rk_kernel(KIND_DP5, False)
+#: DP5 with real contacts (a static load, viscoelastic damping).
+dp5_chain_general = rk_kernel(KIND_DP5, True)
+#: RKN4(3) on the paper's chain.
+rkn4_chain = rk_kernel(KIND_RKN4, False)
+#: RKN4(3) with a static load (RKN4 refuses damping: its forces may not read velocities).
+rkn4_chain_general = rk_kernel(KIND_RKN4, True)
 
 
-@njit(**JIT)
-def dp5_chain_general(method, model, run, state, out):
-    """DP5 with real contacts (a static load, viscoelastic damping)."""
-    return rk_integrate(KIND_DP5, True, _steps(method.params), model, run, state, out)
-
-
-@njit(**JIT)
-def rkn4_chain(method, model, run, state, out):
-    """RKN4(3) on the paper's chain."""
-    return rk_integrate(KIND_RKN4, False, _steps(method.params), model, run, state, out)
-
-
-@njit(**JIT)
-def rkn4_chain_general(method, model, run, state, out):
-    """RKN4(3) with a static load (RKN4 refuses damping: its forces may not read velocities)."""
-    return rk_integrate(KIND_RKN4, True, _steps(method.params), model, run, state, out)
-
-
-@njit(**JIT)
+@njit(**JIT_ENTRY)
 def verlet_chain(method, model, run, state, out):
     """Velocity Verlet on the paper's chain, params = [dt]."""
     return verlet_integrate(False, method.params[0], model, run, state, out)
 
 
-@njit(**JIT)
+@njit(**JIT_ENTRY)
 def verlet_chain_general(method, model, run, state, out):
     """Velocity Verlet with a static load (Verlet refuses damping: its forces may not read velocities)."""
     return verlet_integrate(True, method.params[0], model, run, state, out)
@@ -89,6 +68,44 @@ def chain_kernel(kind: int, params):
     raise ValueError(f"no compiled kernel of kind {kind!r}")
 
 
+@njit(**JIT)
+def call_kernel(kernel, method, model, run, state, out):
+    """``kernel(method, model, run, state, out)``: an entry point (a first-class function,
+    :func:`kernel_function`) called from Python. One compiled function for every entry point."""
+    return kernel(method, model, run, state, out)
+
+
 def integrate_chain(method, model, run, state, out):
     """Integrate one chain with the kernel of ``method`` and ``model`` (see the module's contract)."""
-    return chain_kernel(method.kind, model.params)(method, model, run, state, out)
+    kernel = chain_kernel(method.kind, model.params)
+    return call_kernel(kernel_function(kernel, method, model, run, state, out), method, model, run, state, out)
+
+
+class _KernelFunction(WrapperAddressProtocol):
+    """An entry point compiled for one signature, as a first-class function (Numba's wrapper address
+    protocol): a compiled function that takes it calls the entry point's machine code through its
+    address, without linking the entry point's code into its own."""
+
+    def __init__(self, kernel, signature):
+        self.kernel = kernel
+        self.sig = signature
+
+    def __wrapper_address__(self) -> int:
+        from numba.experimental.function_type import _get_wrapper_address
+
+        return _get_wrapper_address(self.kernel, self.sig)
+
+    def signature(self):
+        return self.sig
+
+
+def kernel_function(kernel, *records):
+    """The entry point ``kernel`` (:func:`chain_kernel`) as a first-class function for calls with
+    arguments of the types of ``records`` (method, model, run, state, out), compiled now (or loaded
+    from Numba's cache) for them. Under ``NUMBA_DISABLE_JIT`` the plain Python function."""
+    if not hasattr(kernel, "py_func"):
+        return kernel
+    args = tuple(typeof(r) for r in records)
+    kernel.compile(args)
+    (sig,) = [s for s in kernel.nopython_signatures if s.args == args]
+    return _KernelFunction(kernel, sig)

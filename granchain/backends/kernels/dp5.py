@@ -11,7 +11,7 @@ import numpy as np
 from numba import njit
 
 from .forces import accelerations
-from .jit import JIT, JIT_INLINE
+from .jit import JIT_INLINE, JIT_INTERNAL
 
 ORDER = 5
 
@@ -43,7 +43,7 @@ P = np.array(
 )
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def dense_weights(theta, Q):
     """Q[s] = sum_p P[s, p] theta^(p+1), so that y(theta) = y + h sum_s K_s Q[s]."""
     for s in range(7):

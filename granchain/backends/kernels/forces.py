@@ -25,7 +25,7 @@ import math
 
 from numba import njit
 
-from .jit import JIT, JIT_INLINE
+from .jit import JIT, JIT_INLINE, JIT_INTERNAL
 from .records import INFO_FROZEN_POTENTIAL, INFO_WINDOW_START
 
 # Fast paths for the contact power delta^(n-1).
@@ -43,7 +43,7 @@ def power_code(n: float) -> int:
     return POW_GENERAL
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def contact_force(d, c, p):
     """c * d^(n-1) for d > 0, else 0 (Eq. motion_rescaled); n and its fast path from ``p``
     (``records.Params``)."""
@@ -57,7 +57,7 @@ def contact_force(d, c, p):
     return c * d ** (p.n - 1.0)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def law_force(d, w, c, p):
     """The force of a contact of compression ``d`` (the static overlap included) closing at the rate
     ``w`` = d(delta)/dt, by the chain's contact law: the elastic :func:`contact_force` when
@@ -78,7 +78,7 @@ def law_force(d, w, c, p):
     return max(f, 0.0)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def force_rate(d, w, dw, c, p):
     """d/dt of :func:`law_force` for compression ``d``, rate ``w`` and its derivative ``dw`` (the
     relative acceleration): where it falls from + to - the contact force peaks. For the elastic law
@@ -93,7 +93,7 @@ def force_rate(d, w, dw, c, p):
     return c * ((n - 1.0) * d ** (n - 2.0) * w + g * ((n - 2.0) * d ** (n - 3.0) * w * w + d ** (n - 2.0) * dw))
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def static_state(c, p):
     """(delta0, f0) of a contact of prefactor ``c`` in the static state of a chain precompressed by
     F0 = ``p.static_force`` (``granchain.model.contacts.Precompression``): the overlap
@@ -157,12 +157,30 @@ def accelerations(x, v, fm, hi, F, a, general):
     return dissipated
 
 
-@njit(**JIT)
+def _accelerations_call(general):
+    """:func:`accelerations` compiled as a function of its own for the model class ``general``, a
+    constant of its code (this closure's variable: Numba prunes the other class's branches)."""
+
+    @njit(**JIT_INTERNAL)
+    def call(x, v, fm, hi, F, a):
+        return accelerations(x, v, fm, hi, F, a, general)
+
+    return call
+
+
+_accelerations_paper = _accelerations_call(False)
+_accelerations_general = _accelerations_call(True)
+
+
+@njit(**JIT_INLINE)
 def accelerations_once(x, v, fm, hi, F, a, general):
     """:func:`accelerations` as a call, not inlined: for the step loops' calls outside the stages
     (the first stage, a window that grows or is cut), which are rare; the stages inline their one call.
-    Every copy inlined is compiled again (the first run of a kernel pays for it)."""
-    return accelerations(x, v, fm, hi, F, a, general)
+    Every copy inlined is compiled again (the first run of a kernel pays for it). Itself inlined where
+    ``general`` is a constant: a call of the function compiled for it."""
+    if general:
+        return _accelerations_general(x, v, fm, hi, F, a)
+    return _accelerations_paper(x, v, fm, hi, F, a)
 
 
 @njit(**JIT)
@@ -172,7 +190,7 @@ def impulse_energy(m0, v0):
     return 0.5 * m0 * v0 * v0
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def total_energy(x, v, m, c, p):
     """Kinetic plus potential energy, sum m v^2/2 + sum (c/n) delta^n (Eq. hertz-1).
 
@@ -186,7 +204,7 @@ def total_energy(x, v, m, c, p):
     return add_potential(e, x, c, p, 0, M - 1)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def add_potential(e, x, c, p, first, last):
     """e + the potential energy of contacts first..last-1, added one contact at a time (the order
     :func:`total_energy` has always summed in): (c_j / n) delta_j^n (Eq. hertz-1). For a

@@ -15,10 +15,29 @@ JIT = dict(
 )
 
 #: Same flags, inlined into the caller at Numba-IR level: for the helpers called every step of an
-#: integrator's loop. Numba does not let LLVM inline across separately compiled functions, and a call
-#: passes each array as seven scalars (plus a reference-count increment and decrement for an owning
-#: array, see ``_common.borrowed``): per call more than the arithmetic of the small helpers.
+#: integrator's loop (a call passes each array as seven scalars, plus a reference-count increment and
+#: decrement for an owning array, see ``memory.borrowed``), and for helpers whose arguments are
+#: constants where they are called (Numba prunes the branches those decide in the inlined copy). Each
+#: inlined copy costs the first run Numba's front end again (IR-inlining the root search's helpers
+#: cost more compilation than it saved); LLVM also inlines small compiled functions, whose code Numba
+#: links into their callers'.
 JIT_INLINE = dict(JIT, inline="always")
 
-#: Same flags plus threading, for the ensemble loop (``numba.prange``).
-JIT_PARALLEL = dict(JIT, parallel=True)
+#: Same flags, for the helpers that only compiled code calls: without the CPython and C wrappers Numba
+#: generates for every compiled function so that Python (or a function pointer) can call it. For a
+#: helper taking records of arrays the CPython wrapper's unboxing is more code than the helper, and
+#: Numba lowers it and LLVM optimises and compiles it on the first run like any other code.
+JIT_INTERNAL = dict(JIT, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+
+#: Same flags, for the single-chain entry points: called through their address (a C wrapper) by the
+#: ensemble kernel and by :data:`~granchain.backends.kernels.dispatch.call_kernel`, never by Python
+#: directly, so without the CPython wrapper (its unboxing of five records is compiled once, for
+#: ``call_kernel``, not once per entry point).
+JIT_ENTRY = dict(JIT, no_cpython_wrapper=True)
+
+#: Same flags plus threading, for the ensemble loop (``numba.prange``): that loop alone. With
+#: ``parallel=True`` Numba also turns array expressions and allocations (the ``np.zeros`` of each
+#: realisation's arrays, inside the loop) into parallel loops of their own, which it then runs serially
+#: there: ~0.6 s more compilation of the ensemble kernel and nothing at run time.
+JIT_PARALLEL = dict(JIT, parallel=dict(prange=True, comprehension=False, setitem=False, reduction=False, numpy=False,
+                                       stencil=False, fusion=False, inplace_binop=False))

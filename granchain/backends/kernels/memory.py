@@ -7,7 +7,7 @@ from numba import njit, types
 from numba.core import errors
 from numba.extending import intrinsic, overload
 
-from .jit import JIT
+from .jit import JIT, JIT_INTERNAL
 
 
 @intrinsic
@@ -43,7 +43,7 @@ def _borrowed_compiled(a):
     return impl
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def keep_alive(*arrays):
     """Does nothing: a use of ``arrays`` after the last use of their :func:`borrowed` views, so that
     Numba releases them only after that."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 from numba import njit
 
 from .forces import law_force, static_state
-from .jit import JIT
+from .jit import JIT, JIT_INTERNAL
 from .records import (
     INFO_DISSIPATED,
     INFO_EVALUATIONS,
@@ -23,7 +23,7 @@ from .records import (
 )
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def initial_records(obs, v, t_grid, peak_v, peak_t, grid_v):
     """The state at t = 0 is the first peak candidate and fills grid times <= 0; returns the next grid index."""
     n_obs = obs.shape[0]
@@ -38,7 +38,7 @@ def initial_records(obs, v, t_grid, peak_v, peak_t, grid_v):
     return g
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def initial_force_records(x, v, model, g, out, contacts):
     """The contact forces at t = 0 (the state (x, v)) are the first peak candidates, at time 0: 0 for an
     unloaded chain, the static load of a precompressed one (the floor its peaks rise from); with a wall,
@@ -59,7 +59,7 @@ def initial_force_records(x, v, model, g, out, contacts):
             out.grid_c[gg, s] = out.peak_f[contacts[s]]
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def is_new_peak(candidate, current, peak_rtol):
     """Does a local maximum ``candidate`` replace the recorded peak ``current``?
 
@@ -72,7 +72,7 @@ def is_new_peak(candidate, current, peak_rtol):
     return candidate > current + peak_rtol * abs(current)
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def final_peaks(obs, lo, v, a, t, peak_rtol, peak_v, peak_t):
     """The velocity at the end of the run is a candidate if the granule is still speeding up
     (a > 0). A granule in free flight (a = 0) had its maximum located where its contact
@@ -88,7 +88,7 @@ def final_peaks(obs, lo, v, a, t, peak_rtol, peak_v, peak_t):
             peak_t[q] = t
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def final_force_peaks(x, v, c, p, lo, t, peak_rtol, peak_f, peak_ft):
     """The force at the end of the run is a candidate for contacts still compressing
     (delta > 0 and v_k - v_{k+1} > 0): their maximum lies beyond the run.

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import literally, njit
+from numba import njit
 
 from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW
 from . import dp5, rkn4
@@ -29,7 +29,7 @@ from .dense import (
     weights,
 )
 from .forces import accelerations_once, add_potential, contact_force, force_rate, static_state
-from .jit import JIT, JIT_INLINE
+from .jit import JIT_ENTRY, JIT_INLINE, JIT_INTERNAL
 from .memory import borrowed, keep_alive
 from .peaks import (
     final_force_peaks,
@@ -39,7 +39,7 @@ from .peaks import (
     is_new_peak,
     write_info,
 )
-from .records import KIND_DP5, KIND_RKN4, Dense, Forces, Model, Outputs, Run, State
+from .records import KIND_RKN4, Dense, Forces, Model, Outputs, Run, Steps
 from .stop import end_of_step, stop_time
 from .window import (
     advance_window,
@@ -108,374 +108,401 @@ def error_norm(method, x, v, xs, vs, Kx, Kv, h, hi, relaxed, steps, ratio):
     return ratio[0]
 
 
-# Inlined into each entry point of ``dispatch`` (it is only the set-up around the loop), so that
-# ``method`` and ``general`` reach the step loop as constants.
 @njit(**JIT_INLINE)
-def rk_integrate(method, general, steps, model, run, state, out):
-    """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
-    final state) with the Runge-Kutta ``method`` (``records.KIND_DP5``, or ``KIND_RKN4``: the
-    Runge-Kutta-Nystrom pair of ``rkn4``, same loop, step control and records; ``general`` True for
-    real contacts: see :func:`_rk_loop`) and its step control ``steps`` (``records.Steps``),
-    recording into ``out`` (``records.Outputs``) what ``run`` asks (``records.Run``).
+def unpack_steps(params):
+    """DP5's and RKN4's params = [rtol, atol, first_step, fixed_step (0: adaptive), relaxed_lag,
+    relaxed_factor, window_lag (lags 0: off)] (``records.Method.params``) as ``records.Steps``."""
+    return Steps(params[0], params[1], params[2], params[3], int(params[4]), params[5], int(params[6]))
 
-    For each observed granule q (0-based index run.observed[q]) the kernel writes the maximum
-    velocity ``peak_v[q]`` and its time ``peak_t[q]`` (see ``peaks.is_new_peak`` for ties), and the
-    velocity at each time t_grid[g] into ``grid_v[g, q]`` (time-major: one contiguous row per grid
-    time). For each contact j (0-based, M-1 of them) it writes the maximum contact force
-    ``peak_f[j]`` and its time ``peak_ft[j]`` (0 at t = 0 for a contact that never closed; same tie
-    rule as the velocities); with a wall (``model.params.wall``) ``grid_f[g]`` receives the wall force at
-    t_grid[g] (untouched otherwise). ``steps.fixed_step > 0`` turns step control off. With
-    ``run.stop_at_exit`` the run ends ``exit_margin`` after the pulse has left the last granule (and
-    not before t_grid[-1]); otherwise at ``t_max``.
 
-    Goal-oriented error control (``granchain.DP5``; off when the lags are 0; the Python layer sets
-    them to 0 for a chain ending in a wall, whose pulse comes back, and says so in its records). The
-    *front* is the most advanced observed granule whose velocity maximum has been located; it never
-    moves backwards.
-    - ``relaxed_lag`` > 0: granules behind observed granule front - relaxed_lag enter the error norm
-      with tolerances ``relaxed_factor`` times looser (the relaxed zone).
-    - ``window_lag`` > 0: granules behind observed granule front - window_lag, cut across the
-      last contact behind it that is open at that moment, leave the integration (the trailing
-      window): they keep their velocity (positions continue ballistically), their peaks are final,
-      and the contact at the window's edge is dropped. Granules lo..M-1 stay integrated, so the
-      work per step is bounded by the window, not the chain.
+@njit(**JIT_INTERNAL)
+def padded_arrays(model, state):
+    """The arrays of the step loop of :func:`rk_kernel`, in the padded layout (see LANES): state,
+    stiffness and inverse masses of the M granules followed by LANES padding granules with zero
+    stiffness and zero inverse mass, which stay exactly at rest; the static overlaps and forces of a
+    precompressed chain; the zeroed scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``,
+    ``vs`` (Mp); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); the stages'
+    dissipated power ``Pd`` (7); error ratios ``ratio`` (2 Mp); ``peak_d``, ``t_frozen`` (M)).
 
-    ``out.info`` receives the INFO_* slots of ``records`` (t_end, steps, rejected, exit time, force
-    evaluations, window start, potential energy of the frozen contacts). Returns the status code
-    (``granchain._status``).
-    """
-    m, c = model.masses, model.stiffness
-    x, v = state
-    M = m.shape[0]
-    # The padded layout (see LANES): state, stiffness and inverse masses of the M granules followed
-    # by LANES padding granules with zero stiffness and zero inverse mass, which stay exactly at rest.
+    A function of its own, called by the kernel: allocated in the kernel's own code, where LLVM sees
+    the arrays' sizes, the step loop ran 3-7 % slower on N = 101 decorated chains (DP5 and RKN4,
+    same-run timings)."""
+    x0, v0 = state
+    m0, c0, p = model.masses, model.stiffness, model.params
+    M = m0.shape[0]
     Mp = M + LANES
     xp = np.zeros(Mp)
     vp = np.zeros(Mp)
     cp = np.zeros(Mp)
-    inv_m = np.zeros(Mp)
-    op = np.zeros(Mp)  # static overlaps delta0_k (precompression; else 0)
-    f0p = np.zeros(Mp)  # static forces f0_k
-    xp[:M] = x
-    vp[:M] = v
-    cp[:M - 1] = c
-    inv_m[:M] = 1.0 / m
-    if model.params.static_force > 0.0:
+    inv_mp = np.zeros(Mp)
+    opp = np.zeros(Mp)  # static overlaps delta0_k (precompression; else 0)
+    f0pp = np.zeros(Mp)  # static forces f0_k
+    for i in range(M):  # (element by element: a slice assignment compiles its shape check's error message)
+        xp[i] = x0[i]
+        vp[i] = v0[i]
+        inv_mp[i] = 1.0 / m0[i]
+    for j in range(M - 1):
+        cp[j] = c0[j]
+    if p.static_force > 0.0:
         for j in range(M - 1):
-            op[j], f0p[j] = static_state(c[j], model.params)
-    Kx = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
-    Kv = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
-    xs = np.zeros(Mp)
-    vs = np.zeros(Mp)
-    F = np.zeros(Mp + 1)  # contact forces, F[j + 1] for contact j (see forces.accelerations)
-    Q = np.zeros(7)
-    Qv = np.zeros(7)  # RKN4's velocity weights (DP5 uses Q for both)
-    Pd = np.zeros(7)  # dissipated power at DP5's stages
-    ratio = np.zeros(2 * Mp)
-    peak_d = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
-    t_frozen = np.zeros(M)  # time each granule left the trailing window
-    # The step loop works on borrowed views (see memory.borrowed): the arguments are held by
-    # our caller, the scratch arrays above by the keep_alive call after the loop.
-    bmodel = Model(borrowed(m), borrowed(cp), model.params)
-    brun = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin,
-               run.max_steps, run.peak_rtol, borrowed(run.contacts), borrowed(run.pulse_end))
-    bstate = State(borrowed(xp), borrowed(vp))
-    bout = Outputs(borrowed(out.peak_v), borrowed(out.peak_t), borrowed(out.grid_v), borrowed(out.peak_f),
-                   borrowed(out.peak_ft), borrowed(out.grid_f), borrowed(out.info), borrowed(out.grid_c))
-    scratch = (borrowed(inv_m), borrowed(Kx), borrowed(Kv), borrowed(xs), borrowed(vs), borrowed(F), borrowed(Q),
-               borrowed(Qv), borrowed(ratio), borrowed(peak_d), borrowed(t_frozen), borrowed(op), borrowed(f0p),
-               borrowed(Pd))
-    status = _rk_loop(method, general, steps, bmodel, brun, bstate, bout, scratch)
-    keep_alive(xp, vp, cp, inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd)
-    x[:] = xp[:M]
-    v[:] = vp[:M]
-    return status
+            opp[j], f0pp[j] = static_state(c0[j], p)
+    Kxp = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
+    Kvp = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
+    xsp = np.zeros(Mp)
+    vsp = np.zeros(Mp)
+    Fp = np.zeros(Mp + 1)  # contact forces, F[j + 1] for contact j (see forces.accelerations)
+    Qp = np.zeros(7)
+    Qvp = np.zeros(7)  # RKN4's velocity weights (DP5 uses Q for both)
+    Pdp = np.zeros(7)  # dissipated power at DP5's stages
+    ratiop = np.zeros(2 * Mp)
+    peak_dp = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
+    t_frozenp = np.zeros(M)  # time each granule left the trailing window
+    return xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp, t_frozenp
 
 
-# One compiled loop per (method, general), the two arguments literal values (``numba.literally``): each
-# specialisation is compiled, and cached, only when a run uses it, and the two are constants in its
-# machine code (a literal argument is lowered as its value), so that LLVM drops the other method's
-# branches and, for the paper's chain (``general`` False), the real contacts' code (compiled once with
-# the method a run-time value, the loop cost DP5 ~6 % more per realisation; see forces.accelerations
-# for ``general``). The loop used to be inlined at the Numba-IR level into one wrapper per
-# specialisation: inlining deep-copies the loop's IR, and that copy was ~8 s of the ~22 s a first DP5
-# run compiled (measured with an empty cache).
-@njit(**JIT)
-def _rk_loop(method, general, steps, model, run, state, out, scratch):
-    """The step loop of :func:`rk_integrate`, on borrowed arrays (``memory.borrowed``: no reference
-    counting in the loop): its records, with the state (x, v), the stiffness and the inverse masses
-    ``inv_m`` = 1 / m in the padded layout (length Mp = M + LANES, see :data:`LANES`), and the zeroed
-    scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``, ``vs`` (Mp); ``peak_d``,
-    ``t_frozen`` (M); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); error
-    ratios ``ratio`` (2 Mp); static overlaps and forces ``op``, ``f0p`` (Mp, ``forces.static_state``);
-    the stages' dissipated power ``Pd`` (7)) in the tuple ``scratch``."""
-    literally(method)
-    literally(general)
-    inv_m, Kx, Kv, xs, vs, F, Q, Qv, ratio, peak_d, t_frozen, op, f0p, Pd = scratch
-    m, c, p = model.masses, model.stiffness, model.params
-    x, v = state
-    obs, t_grid, pulse_end = run.observed, run.t_grid, run.pulse_end
-    peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
-    peak_rtol = run.peak_rtol
-    h_fixed, relax_lag, window_lag = steps.fixed_step, steps.relaxed_lag, steps.window_lag
-    M = m.shape[0]
-    Mp = x.shape[0]
-    n_obs = obs.shape[0]
-    n_grid = t_grid.shape[0]
-    sensed = run.contacts
-    n_sensed = sensed.shape[0]
+def rk_kernel(method, general):
+    """The compiled single-chain entry point ``kernel(record, model, run, state, out)`` of the
+    Runge-Kutta ``method`` (``records.KIND_DP5``, or ``KIND_RKN4``) for the model class ``general``
+    (see below): ``dispatch`` makes one per pair.
 
-    # The window: granules lo..hi-1 are integrated (lo = 0 until a trailing-window cut). Kx, Kv are
-    # window-local (shifted to start at lo at each cut); the other arrays are read through views from
-    # granule lo on, taken in the step loop below.
-    QV = Qv if method == KIND_RKN4 else Q  # velocity weights (see dense.weights)
-    alpha = ALPHA_RKN4 if method == KIND_RKN4 else ALPHA  # PI controller exponent of the error estimate
-    goal = relax_lag > 0 or window_lag > 0
-    damped = general and p.gamma > 0.0
-    ahead = margin(p)
-    lo = 0
-    hi = initial_window(x[:M], v[:M], ahead)
-    Pd[0] = accelerations_once(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0], general)
-    for i in range(hi):
-        Kx[0, i] = v[i]
-    n_eval = 1
-    front = -1  # observed granule (index into obs) of the front
-    # Observed granules in the window: obs[q_lo..q_hi-1] (obs increases; both ends only move forward),
-    # so that a step's peak search costs O(window), not O(observed granules) (long chains).
-    q_lo = 0
-    q_hi = 0
-    while q_hi < n_obs and obs[q_hi] < hi:
-        q_hi += 1
-    # Observed granules whose averaged-pulse window has closed: obs[0..q_open-1] (run.pulse_end; only
-    # moves forward). The trailing window never cuts ahead of obs[q_open].
-    q_open = 0
-    windows = pulse_end.shape[0] > 0
-    relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
-    frozen_potential = 0.0
-    dissipated = 0.0
+    ``method`` and ``general`` are constants of the kernel's code (variables of this closure, which
+    Numba compiles as constants and prunes the branches they decide before typing them): the DP5
+    kernel holds no RKN4 code, the paper's chain (``general`` False) none of the real contacts' (a
+    static load, damping and the dissipated power: see ``forces.accelerations``). One compiled
+    function holds the step loop and the set-up around it (:func:`padded_arrays` allocates its
+    arrays): it is compiled, and cached (Numba keys a closure's cache entry on the values of its
+    variables), only when a run uses it. The step loop used to be a
+    function of its own, called by one wrapper per pair with the two as literal arguments; Numba
+    typed and lowered every method's and model's branches of it (it does not prune on a literal
+    argument) and LLVM optimised and compiled the loop's code a second time in the wrapper's library.
+    With a run-time ``method`` and ``general`` the loop cost DP5 ~6 % more per realisation, and one
+    force routine with a run-time test cost the paper's ensembles 10-20 % (same-run timings against
+    granchain 0.4.0).
+    """
 
-    t = 0.0
-    g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
-    t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
-    initial_force_records(x[:M], v[:M], model, g, out, run.contacts)
+    @njit(**JIT_ENTRY)
+    def kernel(record, model, run, state, out):
+        """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
+        final state) with the Runge-Kutta ``method`` (``records.KIND_DP5``, or ``KIND_RKN4``: the
+        Runge-Kutta-Nystrom pair of ``rkn4``, same loop, step control and records; ``general`` True for
+        real contacts) and its step control ``steps`` (``records.Steps``, from ``record.params``: see
+        :func:`unpack_steps`), recording into ``out`` (``records.Outputs``) what ``run`` asks
+        (``records.Run``).
 
-    h = h_fixed if h_fixed > 0.0 else steps.first_step
-    err_old = 1e-4
-    exit_since = -1.0
-    n_acc = 0
-    n_rej = 0
-    status = -1
-    # Two loops: the outer one takes views of the window (from granule lo on) that the steps of the
-    # inner one do not move; a trailing-window cut ends the inner loop after its step. Views that
-    # stay put through the step loop are loop invariants to the compiler: when they were moved
-    # inside it, a step cost 15-20 % more on N = 6 and 10-15 % more on N = 26 decorated chains
-    # (~410 -> ~350 ns and ~750 -> ~670 ns, exact DP5, same-process timings), window or not.
-    while status < 0:
-        # Views from granule lo on (contiguous, so the stage loops vectorise): X, V, C, IM, XS, VS
-        # through the padding (the loops over the window), XM, VM, MM to the chain's end (the
-        # routines that look for its last granule).
-        X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
-        XS, VS = xs[lo:], vs[lo:]
-        XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
-        OP = op[lo:]
-        FM = Forces(C, IM, p, OP, f0p[lo:])
+        For each observed granule q (0-based index run.observed[q]) the kernel writes the maximum
+        velocity ``peak_v[q]`` and its time ``peak_t[q]`` (see ``peaks.is_new_peak`` for ties), and the
+        velocity at each time t_grid[g] into ``grid_v[g, q]`` (time-major: one contiguous row per grid
+        time). For each contact j (0-based, M-1 of them) it writes the maximum contact force
+        ``peak_f[j]`` and its time ``peak_ft[j]`` (0 at t = 0 for a contact that never closed; same tie
+        rule as the velocities); with a wall (``model.params.wall``) ``grid_f[g]`` receives the wall force at
+        t_grid[g] (untouched otherwise). ``steps.fixed_step > 0`` turns step control off. With
+        ``run.stop_at_exit`` the run ends ``exit_margin`` after the pulse has left the last granule (and
+        not before t_grid[-1]); otherwise at ``t_max``.
+
+        Goal-oriented error control (``granchain.DP5``; off when the lags are 0; the Python layer sets
+        them to 0 for a chain ending in a wall, whose pulse comes back, and says so in its records). The
+        *front* is the most advanced observed granule whose velocity maximum has been located; it never
+        moves backwards.
+        - ``relaxed_lag`` > 0: granules behind observed granule front - relaxed_lag enter the error norm
+          with tolerances ``relaxed_factor`` times looser (the relaxed zone).
+        - ``window_lag`` > 0: granules behind observed granule front - window_lag, cut across the
+          last contact behind it that is open at that moment, leave the integration (the trailing
+          window): they keep their velocity (positions continue ballistically), their peaks are final,
+          and the contact at the window's edge is dropped. Granules lo..M-1 stay integrated, so the
+          work per step is bounded by the window, not the chain.
+
+        ``out.info`` receives the INFO_* slots of ``records`` (t_end, steps, rejected, exit time, force
+        evaluations, window start, potential energy of the frozen contacts). Returns the status code
+        (``granchain._status``).
+        """
+        # The steps' controls (``record``: ``records.Method``, its ``params`` laid out by ``unpack_steps``).
+        steps = unpack_steps(record.params)
+        x0, v0 = state  # the initial state; receives the final one
+        m0, p = model.masses, model.params
+        M = m0.shape[0]
+        (xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp,
+         t_frozenp) = padded_arrays(model, state)
+        # The step loop works on borrowed views (see memory.borrowed: no reference counting in the loop's
+        # calls): the arguments are held by our caller, the arrays allocated here by the keep_alive call
+        # after the loop.
+        m, c = borrowed(m0), borrowed(cp)
+        x, v = borrowed(xp), borrowed(vp)
+        inv_m, Kx, Kv, xs, vs, F = borrowed(inv_mp), borrowed(Kxp), borrowed(Kvp), borrowed(xsp), borrowed(vsp), borrowed(Fp)
+        Q, Qv, ratio, peak_d, t_frozen = borrowed(Qp), borrowed(Qvp), borrowed(ratiop), borrowed(peak_dp), borrowed(t_frozenp)
+        op, f0p, Pd = borrowed(opp), borrowed(f0pp), borrowed(Pdp)
+        model = Model(m, c, p)
+        run = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin, run.max_steps,
+                  run.peak_rtol, borrowed(run.contacts), borrowed(run.pulse_end))
+        out = Outputs(borrowed(out.peak_v), borrowed(out.peak_t), borrowed(out.grid_v), borrowed(out.peak_f),
+                      borrowed(out.peak_ft), borrowed(out.grid_f), borrowed(out.info), borrowed(out.grid_c))
+        obs, t_grid, pulse_end = run.observed, run.t_grid, run.pulse_end
+        peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
+        peak_rtol = run.peak_rtol
+        h_fixed, relax_lag, window_lag = steps.fixed_step, steps.relaxed_lag, steps.window_lag
+        n_obs = obs.shape[0]
+        n_grid = t_grid.shape[0]
+        sensed = run.contacts
+        n_sensed = sensed.shape[0]
+
+        # The window: granules lo..hi-1 are integrated (lo = 0 until a trailing-window cut). Kx, Kv are
+        # window-local (shifted to start at lo at each cut); the other arrays are read through views from
+        # granule lo on, taken in the step loop below.
+        QV = Qv if method == KIND_RKN4 else Q  # velocity weights (see dense.weights)
+        alpha = ALPHA_RKN4 if method == KIND_RKN4 else ALPHA  # PI controller exponent of the error estimate
+        goal = relax_lag > 0 or window_lag > 0
+        damped = general and p.gamma > 0.0
+        ahead = margin(p)
+        # Counters passed to compiled functions start as int64, not as the literal 0 or 1: Numba would
+        # compile those functions twice, once for the literal it meets first while inferring types.
+        lo = np.int64(0)
+        hi = initial_window(x[:M], v[:M], ahead)
+        Pd[0] = accelerations_once(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0], general)
+        for i in range(hi):
+            Kx[0, i] = v[i]
+        n_eval = np.int64(1)
+        front = -1  # observed granule (index into obs) of the front
+        # Observed granules in the window: obs[q_lo..q_hi-1] (obs increases; both ends only move forward),
+        # so that a step's peak search costs O(window), not O(observed granules) (long chains).
+        q_lo = 0
+        q_hi = 0
+        while q_hi < n_obs and obs[q_hi] < hi:
+            q_hi += 1
+        # Observed granules whose averaged-pulse window has closed: obs[0..q_open-1] (run.pulse_end; only
+        # moves forward). The trailing window never cuts ahead of obs[q_open].
+        q_open = 0
+        windows = pulse_end.shape[0] > 0
+        relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
+        frozen_potential = 0.0
+        dissipated = 0.0
+
+        t = 0.0
+        g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
+        t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
+        initial_force_records(x[:M], v[:M], model, g, out, run.contacts)
+
+        h = h_fixed if h_fixed > 0.0 else steps.first_step
+        err_old = 1e-4
+        exit_since = -1.0
+        n_acc = np.int64(0)
+        n_rej = np.int64(0)
+        status = -1
+        # Two loops: the outer one takes views of the window (from granule lo on) that the steps of the
+        # inner one do not move; a trailing-window cut ends the inner loop after its step. Views that
+        # stay put through the step loop are loop invariants to the compiler: when they were moved
+        # inside it, a step cost 15-20 % more on N = 6 and 10-15 % more on N = 26 decorated chains
+        # (~410 -> ~350 ns and ~750 -> ~670 ns, exact DP5, same-process timings), window or not.
         while status < 0:
-            if n_acc + n_rej >= run.max_steps:
-                status = MAX_STEPS
-                break
-            # Land exactly on the end: t_max, or exit_margin after the pulse left (not before t_grid[-1]).
-            t_stop = stop_time(run, exit_since, t_needed)
-            last = False
-            if t + h >= t_stop:
-                h = t_stop - t
-                last = True
-            hw = hi - lo
-            hp = padded_width(hw)
-            # The stages (DP5: 2..7, RKN4: 1..3; the last is the new solution's, reused as the first
-            # next step).
-            if method == KIND_RKN4:
-                rkn4.stages(X, V, Kv, XS, VS, h, hp, FM, F, general)
-                n_eval += 3
-            else:
-                dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F, Pd, general)
-                n_eval += 6
-            # xs, vs now hold the new solution at t + h (DP5: 5th order; RKN4: 4th order).
-            accept = True
-            err = 0.0
-            if h_fixed <= 0.0:
-                err = error_norm(method, X, V, XS, VS, Kx, Kv, h, hp, relaxed, steps, ratio)
-                if damped:
-                    err = max(err, dp5.dissipated_error_ratio(Pd, h, dissipated, steps.rtol, steps.atol))
-                if not math.isfinite(err):
-                    status = NONFINITE
+            # Views from granule lo on (contiguous, so the stage loops vectorise): X, V, C, IM, XS, VS
+            # through the padding (the loops over the window), XM, VM, MM to the chain's end (the
+            # routines that look for its last granule).
+            X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
+            XS, VS = xs[lo:], vs[lo:]
+            XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
+            OP = op[lo:]
+            FM = Forces(C, IM, p, OP, f0p[lo:])
+            while status < 0:
+                if n_acc + n_rej >= run.max_steps:
+                    status = MAX_STEPS
                     break
-                accept = err <= 1.0
-            if not accept:
-                n_rej += 1
-                h *= max(MIN_FACTOR, SAFETY * err**-alpha)
-                if h < 1e-14 * max(1.0, t):
-                    status = STEP_UNDERFLOW
-                continue
+                # Land exactly on the end: t_max, or exit_margin after the pulse left (not before t_grid[-1]).
+                t_stop = stop_time(run, exit_since, t_needed)
+                last = False
+                if t + h >= t_stop:
+                    h = t_stop - t
+                    last = True
+                hw = hi - lo
+                hp = padded_width(hw)
+                # The stages (DP5: 2..7, RKN4: 1..3; the last is the new solution's, reused as the first
+                # next step).
+                if method == KIND_RKN4:
+                    rkn4.stages(X, V, Kv, XS, VS, h, hp, FM, F, general)
+                    n_eval += 3
+                else:
+                    dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F, Pd, general)
+                    n_eval += 6
+                # xs, vs now hold the new solution at t + h (DP5: 5th order; RKN4: 4th order).
+                accept = True
+                err = 0.0
+                if h_fixed <= 0.0:
+                    err = error_norm(method, X, V, XS, VS, Kx, Kv, h, hp, relaxed, steps, ratio)
+                    if damped:
+                        err = max(err, dp5.dissipated_error_ratio(Pd, h, dissipated, steps.rtol, steps.atol))
+                    if not math.isfinite(err):
+                        status = NONFINITE
+                        break
+                    accept = err <= 1.0
+                if not accept:
+                    n_rej += 1
+                    h *= max(MIN_FACTOR, SAFETY * err**-alpha)
+                    if h < 1e-14 * max(1.0, t):
+                        status = STEP_UNDERFLOW
+                    continue
 
-            # Accepted: peaks and grid samples from the dense output over [t, t + h].
-            if method == KIND_RKN4:
-                rkn4.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
-            step = Dense(X, V, Kx, Kv, h)
-            # Velocity maxima where an acceleration goes from + to -: a vectorised count over every
-            # granule of the window (zeros past it) first; the loop over the observed granules runs
-            # only when it finds one (1.6 % of the steps of an N = 26 decorated chain have one there).
-            n_candidates = 0
-            for i in range(hp):
-                n_candidates += falls(Kv[0, i], Kv[6, i])
-            for q in range(q_lo, q_hi if n_candidates > 0 else q_lo):
-                k = obs[q] - lo
-                a0 = Kv[0, k]
-                a1 = Kv[6, k]
-                if falls(a0, a1):
-                    theta = first_root(method, ROOT_ACCELERATION, k, (a0, a1), step, FM, Q, QV)
-                    weights(method, theta, Q, QV)
-                    vpk = dense_value(V[k], Kv, k, h, QV)
-                    if is_new_peak(vpk, peak_v[q], peak_rtol):
-                        peak_v[q] = vpk
-                        peak_t[q] = t + theta * h
-                    front = max(front, q)
-            # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -. The same
-            # vectorised count first (~80 % of the steps of an N = 26 decorated chain have no
-            # candidate; the contacts past the window, resting or padding, are never one, except the
-            # padding's with the last granule, which only lets the loop run).
-            # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
-            n_candidates = 0
-            if damped:  # a viscoelastic force peaks before its compression does: follow its rate
-                for j in range(hw - 1):
-                    r0 = force_rate(OP[j] + (X[j] - X[j + 1]), Kx[0, j] - Kx[0, j + 1], Kv[0, j] - Kv[0, j + 1], C[j], p)
-                    r1 = force_rate(OP[j] + (XS[j] - XS[j + 1]), Kx[6, j] - Kx[6, j + 1], Kv[6, j] - Kv[6, j + 1], C[j], p)
-                    if falls(r0, r1):
-                        theta = first_root(method, ROOT_FORCE_RATE, j, (r0, r1), step, FM, Q, QV)
+                # Accepted: peaks and grid samples from the dense output over [t, t + h].
+                if method == KIND_RKN4:
+                    rkn4.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+                step = Dense(X, V, Kx, Kv, h)
+                # Velocity maxima where an acceleration goes from + to -: a vectorised count over every
+                # granule of the window (zeros past it) first; the loop over the observed granules runs
+                # only when it finds one (1.6 % of the steps of an N = 26 decorated chain have one there).
+                n_candidates = 0
+                for i in range(hp):
+                    n_candidates += falls(Kv[0, i], Kv[6, i])
+                for q in range(q_lo, q_hi if n_candidates > 0 else q_lo):
+                    k = obs[q] - lo
+                    a0 = Kv[0, k]
+                    a1 = Kv[6, k]
+                    if falls(a0, a1):
+                        theta = first_root(method, ROOT_ACCELERATION, k, (a0, a1), step, FM, Q, QV)
                         weights(method, theta, Q, QV)
-                        fp = dense_force(j, step, FM, Q, QV)
+                        vpk = dense_value(V[k], Kv, k, h, QV)
+                        if is_new_peak(vpk, peak_v[q], peak_rtol):
+                            peak_v[q] = vpk
+                            peak_t[q] = t + theta * h
+                        front = max(front, q)
+                # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -. The same
+                # vectorised count first (~80 % of the steps of an N = 26 decorated chain have no
+                # candidate; the contacts past the window, resting or padding, are never one, except the
+                # padding's with the last granule, which only lets the loop run).
+                # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
+                n_candidates = 0
+                if damped:  # a viscoelastic force peaks before its compression does: follow its rate
+                    for j in range(hw - 1):
+                        r0 = force_rate(OP[j] + (X[j] - X[j + 1]), Kx[0, j] - Kx[0, j + 1], Kv[0, j] - Kv[0, j + 1], C[j], p)
+                        r1 = force_rate(OP[j] + (XS[j] - XS[j + 1]), Kx[6, j] - Kx[6, j + 1], Kv[6, j] - Kv[6, j + 1], C[j], p)
+                        if falls(r0, r1):
+                            theta = first_root(method, ROOT_FORCE_RATE, j, (r0, r1), step, FM, Q, QV)
+                            weights(method, theta, Q, QV)
+                            fp = dense_force(j, step, FM, Q, QV)
+                            if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
+                                peak_f[lo + j] = fp
+                                peak_ft[lo + j] = t + theta * h
+                else:
+                    for j in range(hp):
+                        n_candidates += falls(Kx[0, j] - Kx[0, j + 1], Kx[6, j] - Kx[6, j + 1])
+                for j in range(hw - 1 if n_candidates > 0 else 0):
+                    w0 = Kx[0, j] - Kx[0, j + 1]
+                    w1 = Kx[6, j] - Kx[6, j + 1]
+                    if falls(w0, w1):
+                        # Screen: the cubic Hermite estimate of the compression maximum from the step ends
+                        # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
+                        d0 = OP[j] + (X[j] - X[j + 1])
+                        d1 = OP[j] + (XS[j] - XS[j + 1])
+                        if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
+                            continue
+                        theta = first_root(method, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
+                        weights(method, theta, Q, QV)
+                        dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
+                        fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
                         if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
                             peak_f[lo + j] = fp
                             peak_ft[lo + j] = t + theta * h
-            else:
-                for j in range(hp):
-                    n_candidates += falls(Kx[0, j] - Kx[0, j + 1], Kx[6, j] - Kx[6, j + 1])
-            for j in range(hw - 1 if n_candidates > 0 else 0):
-                w0 = Kx[0, j] - Kx[0, j + 1]
-                w1 = Kx[6, j] - Kx[6, j + 1]
-                if falls(w0, w1):
-                    # Screen: the cubic Hermite estimate of the compression maximum from the step ends
-                    # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
-                    d0 = OP[j] + (X[j] - X[j + 1])
-                    d1 = OP[j] + (XS[j] - XS[j + 1])
-                    if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
-                        continue
-                    theta = first_root(method, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
+                            peak_d[lo + j] = dp
+                while g < n_grid and t_grid[g] <= t + h:
+                    theta = (t_grid[g] - t) / h
                     weights(method, theta, Q, QV)
-                    dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
-                    fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
-                    if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
-                        peak_f[lo + j] = fp
-                        peak_ft[lo + j] = t + theta * h
-                        peak_d[lo + j] = dp
-            while g < n_grid and t_grid[g] <= t + h:
-                theta = (t_grid[g] - t) / h
-                weights(method, theta, Q, QV)
-                for q in range(n_obs):
-                    k = obs[q] - lo
-                    if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
-                        grid_v[g, q] = 0.0
-                    elif k < 0:  # behind the window: the velocity it left with
-                        grid_v[g, q] = v[obs[q]]
-                    else:
-                        grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
-                if p.wall:  # the total force on the wall (the static load included; only that until the pulse is near)
-                    grid_f[g] = dense_force(M - 2 - lo, step, FM, Q, QV) if M - 2 < hi else f0p[M - 2]
-                for s in range(n_sensed):  # granules past the window are at rest: the force is exact there too
-                    j = sensed[s] - lo
-                    out.grid_c[g, s] = dense_force(j, step, FM, Q, QV) if j >= 0 else math.nan
-                g += 1
+                    for q in range(n_obs):
+                        k = obs[q] - lo
+                        if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
+                            grid_v[g, q] = 0.0
+                        elif k < 0:  # behind the window: the velocity it left with
+                            grid_v[g, q] = v[obs[q]]
+                        else:
+                            grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
+                    if p.wall:  # the total force on the wall (the static load included; only that until the pulse is near)
+                        grid_f[g] = dense_force(M - 2 - lo, step, FM, Q, QV) if M - 2 < hi else f0p[M - 2]
+                    for s in range(n_sensed):  # granules past the window are at rest: the force is exact there too
+                        j = sensed[s] - lo
+                        out.grid_c[g, s] = dense_force(j, step, FM, Q, QV) if j >= 0 else math.nan
+                    g += 1
 
-            for i in range(hp):
-                X[i] = XS[i]
-                V[i] = VS[i]
-                Kx[0, i] = Kx[6, i]
-                Kv[0, i] = Kv[6, i]
-            if damped:
-                dissipated += dp5.dissipated(Pd, h)
-                Pd[0] = Pd[6]
-            t = t + h if not last else t_stop
-            n_acc += 1
-            if h_fixed > 0.0 and not is_finite_window(X, V, hw):  # adaptive: checked in the error norm
-                status = NONFINITE
-                break
-            if hi < M:
-                new_hi = lo + advance_window(XM, VM, hw, ahead)
-                if new_hi > hi:
-                    hi = new_hi
-                    while q_hi < n_obs and obs[q_hi] < hi:
-                        q_hi += 1
-                    Pd[0] = accelerations_once(X, V, FM, hi - lo, F, Kv[0], general)
-                    for i in range(hi - lo):
-                        Kx[0, i] = V[i]
-                    n_eval += 1
-            cut = False
-            if goal and front >= 0:
-                if window_lag > 0 and front >= window_lag:
-                    # Behind the front's lag, and not past a granule whose averaged-pulse window is
-                    # still open (its grid velocities up to run.pulse_end are recorded exactly).
-                    target = front - window_lag
-                    if windows:
-                        while q_open < n_obs and pulse_end[q_open] < t:
-                            q_open += 1
-                        target = min(target, q_open)
-                    new_lo = open_contact_behind(X, C, p, lo, obs[target])
-                    if new_lo > lo:
-                        # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
-                        # contacts among them (the contact at the new edge is open), their exit time.
-                        d = new_lo - lo
-                        frozen_potential = add_potential(frozen_potential, X, C, p, 0, d - 1)
-                        for i in range(d):
-                            t_frozen[lo + i] = t
-                        # Shift the stage arrays by d over the padded window only: past it they are
-                        # zeros (the stages write granules 0..padded_width(hi - lo) - 1 alone), so the
-                        # cut costs O(window), not O(chain) (which made long chains quadratic).
-                        wp = padded_width(hi - lo)
-                        for s in range(7):
-                            for i in range(wp - d):
-                                Kx[s, i] = Kx[s, i + d]
-                                Kv[s, i] = Kv[s, i + d]
-                            for i in range(wp - d, wp):
-                                Kx[s, i] = 0.0
-                                Kv[s, i] = 0.0
-                        lo = new_lo
-                        while q_lo < n_obs and obs[q_lo] < lo:
-                            q_lo += 1
-                        cut = True
-                        if damped:  # the power of the contacts still integrated (the next step's first stage)
-                            Pd[0] = accelerations_once(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:]),
-                                                  hi - lo, F, Kv[0], general)
-                            n_eval += 1
-                if relax_lag > 0 and front >= relax_lag:
-                    relaxed = max(0, obs[front - relax_lag] - lo)
+                for i in range(hp):
+                    X[i] = XS[i]
+                    V[i] = VS[i]
+                    Kx[0, i] = Kx[6, i]
+                    Kv[0, i] = Kv[6, i]
+                if damped:
+                    dissipated += dp5.dissipated(Pd, h)
+                    Pd[0] = Pd[6]
+                t = t + h if not last else t_stop
+                n_acc += 1
+                if h_fixed > 0.0 and not is_finite_window(X, V, hw):  # adaptive: checked in the error norm
+                    status = NONFINITE
+                    break
+                if hi < M:
+                    new_hi = lo + advance_window(XM, VM, hw, ahead)
+                    if new_hi > hi:
+                        hi = new_hi
+                        while q_hi < n_obs and obs[q_hi] < hi:
+                            q_hi += 1
+                        Pd[0] = accelerations_once(X, V, FM, hi - lo, F, Kv[0], general)
+                        for i in range(hi - lo):
+                            Kx[0, i] = V[i]
+                        n_eval += 1
+                cut = False
+                if goal and front >= 0:
+                    if window_lag > 0 and front >= window_lag:
+                        # Behind the front's lag, and not past a granule whose averaged-pulse window is
+                        # still open (its grid velocities up to run.pulse_end are recorded exactly).
+                        target = front - window_lag
+                        if windows:
+                            while q_open < n_obs and pulse_end[q_open] < t:
+                                q_open += 1
+                            target = min(target, q_open)
+                        new_lo = open_contact_behind(X, C, p, lo, obs[target])
+                        if new_lo > lo:
+                            # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
+                            # contacts among them (the contact at the new edge is open), their exit time.
+                            d = new_lo - lo
+                            frozen_potential = add_potential(frozen_potential, X, C, p, 0, d - 1)
+                            for i in range(d):
+                                t_frozen[lo + i] = t
+                            # Shift the stage arrays by d over the padded window only: past it they are
+                            # zeros (the stages write granules 0..padded_width(hi - lo) - 1 alone), so the
+                            # cut costs O(window), not O(chain) (which made long chains quadratic).
+                            wp = padded_width(hi - lo)
+                            for s in range(7):
+                                for i in range(wp - d):
+                                    Kx[s, i] = Kx[s, i + d]
+                                    Kv[s, i] = Kv[s, i + d]
+                                for i in range(wp - d, wp):
+                                    Kx[s, i] = 0.0
+                                    Kv[s, i] = 0.0
+                            lo = new_lo
+                            while q_lo < n_obs and obs[q_lo] < lo:
+                                q_lo += 1
+                            cut = True
+                            if damped:  # the power of the contacts still integrated (the next step's first stage)
+                                Pd[0] = accelerations_once(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:]),
+                                                      hi - lo, F, Kv[0], general)
+                                n_eval += 1
+                    if relax_lag > 0 and front >= relax_lag:
+                        relaxed = max(0, obs[front - relax_lag] - lo)
 
-            if cut:  # XM, VM, MM still start at the old window start
-                status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], p.wall, hi - lo, t, run, exit_since, t_needed)
-            else:
-                status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed)
-            if status >= 0:
-                break
+                if cut:  # XM, VM, MM still start at the old window start
+                    status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], p.wall, hi - lo, t, run, exit_since, t_needed)
+                else:
+                    status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed)
+                if status >= 0:
+                    break
 
-            if h_fixed <= 0.0:
-                fac = SAFETY * max(err, 1e-10) ** -alpha * err_old**BETA
-                fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
-                h *= fac
-                err_old = max(err, 1e-4)
-            if cut:  # new views from the new window start
-                break
-    X, V, C = x[lo:M], v[lo:M], c[lo:M - 1]  # the chain without padding (a cut in the last step left the views behind)
-    final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
-    final_force_peaks(X, V, C, p, lo, t, peak_rtol, peak_f, peak_ft)
-    for k in range(lo):  # the granules behind the window continued ballistically
-        x[k] += v[k] * (t - t_frozen[k])
-    write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential, dissipated)
-    return status
+                if h_fixed <= 0.0:
+                    fac = SAFETY * max(err, 1e-10) ** -alpha * err_old**BETA
+                    fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+                    h *= fac
+                    err_old = max(err, 1e-4)
+                if cut:  # new views from the new window start
+                    break
+        X, V, C = x[lo:M], v[lo:M], c[lo:M - 1]  # the chain without padding (a cut in the last step left the views behind)
+        final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
+        final_force_peaks(X, V, C, p, lo, t, peak_rtol, peak_f, peak_ft)
+        for k in range(lo):  # the granules behind the window continued ballistically
+            x[k] += v[k] * (t - t_frozen[k])
+        write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential, dissipated)
+        keep_alive(xp, vp, cp, inv_mp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, ratiop, peak_dp, t_frozenp, opp, f0pp, Pdp)
+        for i in range(M):
+            x0[i] = xp[i]
+            v0[i] = vp[i]
+        return status
+
+    return kernel

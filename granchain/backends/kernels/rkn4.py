@@ -31,7 +31,7 @@ from __future__ import annotations
 from numba import njit
 
 from .forces import accelerations
-from .jit import JIT, JIT_INLINE
+from .jit import JIT_INLINE, JIT_INTERNAL
 
 ORDER = 4
 
@@ -113,7 +113,7 @@ def dense_data(x, v, xs, vs, Kx, Kv, h, hi):
         Kv[6, i] = a1
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def hermite_weights(theta, Qx, Qv):
     """Weights of :func:`dense_data` at t + theta h: the quintic Hermite basis (value at 0 and at 1,
     slope at 0 and at 1, curvature at 0 and at 1) and its derivative."""

@@ -24,7 +24,7 @@ from numba import njit
 
 from ..._status import MAX_STEPS, NONFINITE
 from .forces import accelerations, contact_force, static_state
-from .jit import JIT, JIT_INLINE
+from .jit import JIT_INLINE, JIT_INTERNAL
 from .peaks import (
     final_force_peaks,
     final_peaks,
@@ -40,7 +40,7 @@ from .window import advance_window, initial_window, margin
 ORDER = 2
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def hermite(y0, dy0, y1, dy1, h, theta):
     """Cubic Hermite interpolant of y through (y0, y0') and (y1, y1') at the step ends, at t + theta h:
     the velocity from (v, a), the position from (x, v)."""
@@ -49,7 +49,7 @@ def hermite(y0, dy0, y1, dy1, h, theta):
     return (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * dy0 + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * dy1
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def _hermite_force(j, x_old, v_old, x, v, h, theta, c, p, o):
     """Contact force of contact j at t + theta h from the Hermite positions (Eq. motion_rescaled), its
     static overlap ``o[j]`` included (a precompressed chain)."""
@@ -59,7 +59,7 @@ def _hermite_force(j, x_old, v_old, x, v, h, theta, c, p, o):
 
 @njit(**JIT_INLINE)
 def verlet_integrate(general, h, model, run, state, out):
-    """Fixed-step velocity Verlet with step ``h``; the contract of ``rkloop.rk_integrate`` (``model``,
+    """Fixed-step velocity Verlet with step ``h``; the contract of the entry points of ``dispatch`` (``model``,
     ``run``, ``state``, ``out``: the records of ``records``).
 
     ``general`` is a compile-time constant of the entry point that inlines this (``dispatch.verlet_chain``

@@ -22,7 +22,7 @@ import math
 from numba import njit
 
 from .forces import contact_force
-from .jit import JIT, JIT_INLINE
+from .jit import JIT_INLINE, JIT_INTERNAL
 
 #: The force (rescaled units: the struck granule's pulse carries forces of order 1) below which a
 #: closed contact behind the pulse may be cut as if it were open. Behind the solitary wave of a
@@ -44,7 +44,7 @@ def margin(p):
     return DAMPED_WINDOW_MARGIN if p.gamma > 0.0 else WINDOW_MARGIN
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def initial_window(x, v, ahead):
     """Window end for a state given at t = 0: ``ahead`` (:func:`margin`) past the last granule that moves."""
     M = x.shape[0]
@@ -64,7 +64,7 @@ def advance_window(x, v, hi, ahead):
     return max(hi, min(M, last + 1 + ahead))
 
 
-@njit(**JIT)
+@njit(**JIT_INTERNAL)
 def open_contact_behind(x, c, p, lo, target):
     """The window start for a cut just behind granule ``target`` (0-based, in the chain): j + 1 for
     the last contact j < target that is open now (x_j <= x_{j+1}; ``x`` and the stiffness ``c`` hold
