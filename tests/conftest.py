@@ -103,6 +103,13 @@ def _v040_tapered_wall():
     return gc.TaperedDecorated(5, q=0.1, distribution=gc.Uniform(0.05, 0.35), wall=True)  # 0.4's ratio 0.9
 
 
+def _v040_integrators():
+    """The ensembles' default integrators of granchain 0.4.0 (today's are tighter: a store names them to resume)."""
+    import granchain as gc
+
+    return {"decorated": gc.RKN4.relaxed(1e-5, 1e-8), "effective": gc.DP5.relaxed(5e-8, 5e-11)}
+
+
 #: The stores granchain 0.4.0 wrote (tests/data/make_v0.4.0_fixtures.py) and how today's API makes the
 #: same runs: {store name: (family factory, run_ensemble keywords)}.
 FIXTURE_GRID = np.round(np.arange(0.0, 30.05, 0.5), 12)
@@ -110,8 +117,8 @@ FIXTURES_040 = {
     # pulse_window="full": stores of 0.4 hold the averaged pulse on the whole grid (run_ensemble resuming
     # one finds that in its record by itself: tests/test_store_upgrade.py)
     "v0.4.0-decorated-N6.zarr": (_v040_decorated, dict(realizations=24, seed=7, chunk_size=8, t_grid=FIXTURE_GRID,
-                                                       pulse_window="full")),
+                                                       pulse_window="full", integrator=_v040_integrators())),
     "v0.4.0-tapered-wall-N5.zarr": (_v040_tapered_wall, dict(realizations=12, seed=3, chunk_size=4, t_grid=FIXTURE_GRID,
                                                              lags=np.round(np.arange(-4.0, 4.05, 0.5), 12),
-                                                             pulse_window="full")),
+                                                             pulse_window="full", integrator=_v040_integrators())),
 }

@@ -91,7 +91,8 @@ def test_a_040_store_opens_with_todays_records_and_metadata(name, tmp_path):
     shutil.copytree(DATA / name, path)
     before = tree_digest(path)
     ds = gc.open_store(path)
-    spec = ens.EnsembleSpec(make(), chains="both", **kw)
+    kw = dict(kw)  # run_ensemble's integrator dict is the spec's chain_integrators
+    spec = ens.EnsembleSpec(make(), chains="both", chain_integrators=kw.pop("integrator"), **kw)
     assert json.loads(ds.attrs["granchain_parameters"]) == spec.describe()
     assert json.loads(ds.attrs["granchain_family"]) == make().describe()
     assert json.loads(ds.attrs["granchain_integrator"]) == spec.integrator.describe()

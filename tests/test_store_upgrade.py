@@ -87,23 +87,27 @@ def test_a_040_store_is_extended_bitwise(name, tmp_path):
     assert_same_results(extended, _run(make(), **more))
 
 
-def test_a_040_store_resumes_without_naming_its_pulse_window(tmp_path):
-    """A store is continued as it was started: the call that made a 0.4.0 store (the averaged pulse on the
-    whole grid, the relaxed defaults) resumes it as it is, without pulse_window="full", and gives the
-    fixture's results; the same call for a new store gets today's defaults, the trailing window with
-    each granule's averaged-pulse window (negative control: its record has them, the 0.4.0 one not)."""
+def test_a_040_store_resumes_without_naming_its_pulse_window_or_integrators(tmp_path):
+    """A store is continued as it was started: the call that made a 0.4.0 store with 0.4.0's defaults
+    (the averaged pulse on the whole grid, the relaxed integrators at 0.4.0's looser tolerances) resumes
+    it as it is, naming neither pulse_window="full" nor the integrators, and gives the fixture's results;
+    the same call for a new store gets today's defaults, the trailing window with each granule's
+    averaged-pulse window at today's tolerances (negative control: its record has them, the 0.4.0 one
+    not)."""
     name = "v0.4.0-decorated-N6.zarr"
     make, kw = FIXTURES[name]
-    kw = {k: v for k, v in kw.items() if k != "pulse_window"}
+    kw = {k: v for k, v in kw.items() if k not in ("pulse_window", "integrator")}
     path = _copy(name, tmp_path)
     with pytest.warns(StoreRepairWarning):
         resumed = _run(make(), path, **kw)
     with xr.open_zarr(DATA / name, consolidated=False) as fixture:
         assert_same_results(resumed, fixture.load())
-    assert "pulse_window" not in json.loads(resumed.attrs["granchain_parameters"])
+    stored = json.loads(resumed.attrs["granchain_parameters"])
+    assert "pulse_window" not in stored
     fresh = _run(make(), tmp_path / "new.zarr", **kw)
     record = json.loads(fresh.attrs["granchain_parameters"])
     assert record["pulse_window"]["rule"] == "auto" and record["integrator"]["window_lag"] == 7
+    assert record["integrator"]["rtol"] == gc.ENSEMBLE_RTOL != stored["integrator"]["rtol"]
 
 
 def test_an_interrupted_040_store_is_finished_bitwise(tmp_path):

@@ -59,10 +59,10 @@ def add_parser(subparsers) -> None:
     integ.add_argument("--integrator", choices=sorted(INTEGRATORS), default=None,
                        help="integrator (default: rkn4 for decorated chains, dp5 for the others)")
     integ.add_argument("--rtol", type=float, default=None,
-                       help="relative tolerance, for every chain kind (defaults: decorated chains rkn4 1e-5, dp5 1e-6; "
-                            "effective 5e-8; the others 2e-9, without the relaxed zone; dop853)")
+                       help="relative tolerance, for every chain kind (defaults: decorated chains rkn4 3e-6, dp5 1e-6; "
+                            "effective 1e-8; the others 2e-9, without the relaxed zone; dop853)")
     integ.add_argument("--atol", type=float, default=None,
-                       help="absolute tolerance (defaults: decorated chains rkn4 1e-8, dp5 1e-9; effective 5e-11; the others "
+                       help="absolute tolerance (defaults: decorated chains rkn4 3e-9, dp5 1e-9; effective 1e-11; the others "
                             "2e-12; dop853)")
     integ.add_argument("--error-control", choices=("windowed", "relaxed", "exact"), default=None,
                        help=f"{' and '.join(taking('relaxed_lag'))} only. Default: windowed for decorated and effective "
@@ -262,7 +262,13 @@ def run(args) -> int:
     chains = tuple(c.strip() for c in args.chain.split(","))
     if chains == ("both",) or len(family.chains) == 1 and args.chain == "both":
         chains = "both"
-    integrator = build_integrator(args, family.chains if chains == "both" else chains, family.contact_law.conservative)
+    integrator = None
+    if args.resume and args.out and all(getattr(args, k) is None for k in ("integrator", "rtol", "atol", "step", "error_control")):
+        from ..ensembles.run import _stored_integrators
+
+        integrator = _stored_integrators(args.out)  # a store is continued with the integrators it was started with
+    if integrator is None:
+        integrator = build_integrator(args, family.chains if chains == "both" else chains, family.contact_law.conservative)
     client = connect(args.scheduler)
     try:
         ds = run_ensemble(

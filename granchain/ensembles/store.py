@@ -772,7 +772,9 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
                      "granchain 0.3, is resumed with integrator=granchain.DP5(1e-6, 1e-9), on the command line "
                      "--integrator dp5 --rtol 1e-6 --atol 1e-9 --error-control exact; one written with granchain "
                      "0.3's defaults with integrator={'decorated': granchain.DP5.relaxed(), 'effective': "
-                     "granchain.DP5.relaxed(5e-8, 5e-11)}, on the command line --integrator dp5)")
+                     "granchain.DP5.relaxed(5e-8, 5e-11)}, on the command line --integrator dp5; one written with "
+                     "granchain 0.4's defaults with integrator={'decorated': granchain.RKN4.relaxed(1e-5, 1e-8), "
+                     "'effective': granchain.DP5.relaxed(5e-8, 5e-11)})")
         raise ValueError(f"{path} was written with different parameters ({diff}){hint}; "
                          "results are never mixed: use another path, or the stored parameters to resume")
     return int(stored_r)
