@@ -602,8 +602,9 @@ def test_describe_records_the_goal_settings_only_when_used():
 
 def test_store_written_exact_is_resumed_with_the_exact_dp5(tmp_path):
     """A store written with the exact DP5 (an interrupted run: one chunk of two done; then one extended)
-    is continued with integrator=DP5(1e-6, 1e-9) to bitwise a fresh run; the relaxed default is another
-    integrator and is refused with a hint naming the exact DP5."""
+    is continued with the integrator its record names, without naming it, to bitwise a fresh run (and
+    with integrator=DP5(1e-6, 1e-9) named); another integrator named, today's default, is refused with
+    a hint naming the exact DP5."""
     from granchain.ensembles.store import ZarrSink
 
     family = gc.RandomDecorated(8)
@@ -617,7 +618,9 @@ def test_store_written_exact_is_resumed_with_the_exact_dp5(tmp_path):
     stored = json.loads(xr.open_zarr(store).attrs["granchain_integrator"])
     assert set(stored) == {"name", "rtol", "atol", "first_step", "fixed_step"}  # the pre-issue-9 record
     with pytest.raises(ValueError, match=r"DP5\(1e-6, 1e-9\)"):
-        gc.run_ensemble(family, realizations=10, out=store, seed=3, chunk_size=5, progress=False)
+        gc.run_ensemble(family, realizations=10, out=store, seed=3, chunk_size=5, progress=False,
+                        integrator=ens.ensemble_integrator("decorated"))
+    assert_same_results(gc.run_ensemble(family, realizations=10, out=store, seed=3, chunk_size=5, progress=False), fresh)
     assert_same_results(gc.run_ensemble(family, realizations=10, out=store, **kw), fresh)
     assert_same_results(xr.open_dataset(store, engine="zarr"), fresh)
     # extended to more realisations with the exact DP5: a fresh run of the larger size
