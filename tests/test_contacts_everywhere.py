@@ -223,8 +223,9 @@ def test_materials_and_elastic_walls_reduce_to_one_material():
 
 def test_dissipative_store_holds_the_dissipated_energy(tmp_path):
     """A viscoelastic family's store holds each realisation's dissipated energy, equal to ``simulate``'s
-    (bitwise: the same kernel and bookkeeping), and positive; an elastic family's store has no such
-    variable (its schema is unchanged)."""
+    (bitwise: the same kernel and bookkeeping), and positive; every granule is integrated to the end
+    (no trailing window: a dropped granule would stop dissipating), so the run has no averaged-pulse
+    windows; an elastic family's store has no such variable (its schema is unchanged)."""
     fam = gc.RandomDecorated(5, contact=gc.Viscoelastic(GAMMA))
     out = str(tmp_path / "d.zarr")
     ds = gc.run_ensemble(fam, realizations=3, chunk_size=2, chains="decorated", out=out, progress=False)
@@ -233,5 +234,7 @@ def test_dissipative_store_holds_the_dissipated_energy(tmp_path):
         d = stored["dissipated_energy"].sel(chain="decorated").values
         assert stored["dissipated_energy"].attrs["units"] == "1"
     assert d[2] == res.dissipated_energy and np.all(d > 0)
+    assert gc.ensemble_integrator("decorated", conservative=False).window_lag is None
+    assert "pulse_window" not in json.loads(ds.attrs["granchain_parameters"])
     plain = gc.run_ensemble(gc.RandomDecorated(5), realizations=2, progress=False)
     assert "dissipated_energy" not in plain

@@ -89,8 +89,10 @@ def ensemble_integrator(chain: str = "decorated", *, conservative: bool = True, 
     :data:`SMOOTH_RTOL`, :data:`SMOOTH_ATOL` for "effective" ones (their accuracy contract is in
     ``DP5``), and ``DP5`` at :data:`RANDOM_RTOL`, :data:`RANDOM_ATOL` without the relaxed zone for every
     other kind (see :data:`RANDOM_RTOL`). For a contact law that is not ``conservative`` (viscoelastic:
-    forces depend on velocities), decorated chains get :meth:`DP5.windowed` at :data:`DAMPED_RTOL`,
-    :data:`DAMPED_ATOL`.
+    forces depend on velocities), decorated chains get :meth:`DP5.relaxed` at :data:`DAMPED_RTOL`,
+    :data:`DAMPED_ATOL`, windowed or not: the granules behind the pulse keep rattling and dissipating
+    until the end, and a granule the trailing window drops stops dissipating (9 % of the dissipated
+    energy lost on a 40-granule chain: docs, "Real contacts"), so every granule is integrated to the end.
 
     ``windowed``: the trailing window, with which a realisation costs linearly in the chain's length
     (the ensembles give each observed granule its averaged-pulse window: ``run_ensemble(pulse_window=
@@ -99,7 +101,7 @@ def ensemble_integrator(chain: str = "decorated", *, conservative: bool = True, 
     defaults before granchain 0.5)."""
     zone = (lambda cls: cls.windowed) if windowed else (lambda cls: cls.relaxed)
     if chain == "decorated":
-        return zone(RKN4)(ENSEMBLE_RTOL, ENSEMBLE_ATOL) if conservative else zone(DP5)(DAMPED_RTOL, DAMPED_ATOL)
+        return zone(RKN4)(ENSEMBLE_RTOL, ENSEMBLE_ATOL) if conservative else DP5.relaxed(DAMPED_RTOL, DAMPED_ATOL)
     if chain == "effective":
         return zone(DP5)(SMOOTH_RTOL, SMOOTH_ATOL)
     return DP5(RANDOM_RTOL, RANDOM_ATOL)
