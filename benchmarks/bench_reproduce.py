@@ -51,7 +51,7 @@ BASELINE_REV = "f6a9782"
 
 #: Run in each side's interpreter: install the phase timer, then ``granchain reproduce``.
 DRIVER = r'''
-import builtins, json, resource, sys, threading, time
+import builtins, json, os, resource, sys, threading, time
 T0 = time.perf_counter()
 MAIN = threading.main_thread()
 acc, cpu_acc, stack, state = {}, {}, [], {"phase": "other", "since": T0, "cpu_since": time.thread_time()}
@@ -108,13 +108,31 @@ def _timed_import(*args, **kwargs):
 builtins.__import__ = _timed_import
 _enter("imports")
 import importlib
+import granchain
 import granchain.cli
-import granchain.paper.reproduce as R
-import granchain.paper.figures as F
-from granchain.ensembles import run as run_mod, store as store_mod
-from granchain import families as fam_mod, analysis
-from granchain.solve import integrators as integ_mod
 import xarray
+
+_PKG = os.path.dirname(granchain.__file__)
+
+
+def _mod(*names):
+    """The first of ``names`` that the imported tree has (by file: an editable install's import hook could
+    otherwise resolve a module the tree lacks to another checkout), imported. The layouts differ between
+    the trees compared: granchain 0.4.0 had granchain._ensemble where 0.5 has granchain.ensembles.run."""
+    for name in names:
+        rel = os.path.join(_PKG, *name.split(".")[1:])
+        if os.path.exists(rel + ".py") or os.path.exists(os.path.join(rel, "__init__.py")):
+            return importlib.import_module(name)
+    return None
+
+
+R = _mod("granchain.paper.reproduce", "granchain._reproduce")
+F = _mod("granchain.paper.figures", "granchain.figures")
+run_mod = _mod("granchain.ensembles.run", "granchain._ensemble")
+store_mod = _mod("granchain.ensembles.store", "granchain._store")
+fam_mod = _mod("granchain.families")
+analysis = _mod("granchain.analysis")
+integ_mod = _mod("granchain.solve.integrators", "granchain._integrators")
 _leave()
 
 
@@ -145,14 +163,15 @@ patch(store_mod.ZarrSink, "write", "store: write")
 patch(store_mod.ZarrSink, "finalize", "store: finalize")
 patch(analysis.ChunkSums, "from_store", "store: read")
 patch(R, "chunk_sums", "store: read")
-for mod in ("granchain.ensembles.read", "granchain.analysis"):
-    patch(importlib.import_module(mod), "open_store", "store: read")
+for mod in ("granchain.ensembles.read", "granchain.analysis", "granchain._store"):
+    if _mod(mod) is not None:
+        patch(_mod(mod), "open_store", "store: read")
 for i in (1, 2, 3, 4):
     fig = getattr(F, f"fig{i}")
     patch(fig, "compute", f"statistics: fig{i}")
     patch(fig, "plot", "figures: plot")
 patch(F, "save", "figures: save")
-patch(importlib.import_module("granchain.paper.figures._style"), "save", "figures: save")
+patch(_mod("granchain.paper.figures._style", "granchain.figures._style"), "save", "figures: save")
 patch(R, "build_records", "statistics: records")
 patch(R, "write_report", "report")
 patch(xarray.Dataset, "to_netcdf", "data files")

@@ -24,7 +24,7 @@ from __future__ import annotations
 from numba import njit, typeof
 from numba.core.types import WrapperAddressProtocol
 
-from .jit import JIT, JIT_ENTRY
+from .jit import JIT
 from .records import KIND_DP5, KIND_RKN4, KIND_VERLET
 from .rkloop import rk_kernel
 from .verlet import verlet_integrate
@@ -39,13 +39,13 @@ rkn4_chain = rk_kernel(KIND_RKN4, False)
 rkn4_chain_general = rk_kernel(KIND_RKN4, True)
 
 
-@njit(**JIT_ENTRY)
+@njit(**JIT)
 def verlet_chain(method, model, run, state, out):
     """Velocity Verlet on the paper's chain, params = [dt]."""
     return verlet_integrate(False, method.params[0], model, run, state, out)
 
 
-@njit(**JIT_ENTRY)
+@njit(**JIT)
 def verlet_chain_general(method, model, run, state, out):
     """Velocity Verlet with a static load (Verlet refuses damping: its forces may not read velocities)."""
     return verlet_integrate(True, method.params[0], model, run, state, out)
@@ -68,17 +68,12 @@ def chain_kernel(kind: int, params):
     raise ValueError(f"no compiled kernel of kind {kind!r}")
 
 
-@njit(**JIT)
-def call_kernel(kernel, method, model, run, state, out):
-    """``kernel(method, model, run, state, out)``: an entry point (a first-class function,
-    :func:`kernel_function`) called from Python. One compiled function for every entry point."""
-    return kernel(method, model, run, state, out)
-
-
 def integrate_chain(method, model, run, state, out):
-    """Integrate one chain with the kernel of ``method`` and ``model`` (see the module's contract)."""
-    kernel = chain_kernel(method.kind, model.params)
-    return call_kernel(kernel_function(kernel, method, model, run, state, out), method, model, run, state, out)
+    """Integrate one chain with the kernel of ``method`` and ``model`` (see the module's contract), called
+    directly through its CPython wrapper: calling it through its address from Python (a compiled caller
+    taking a first-class function) cost ~0.27 ms per call in Numba's dispatch, 5-10 % of a decorated
+    N = 26 ``simulate``, for ~2 s less compilation of a first ensemble."""
+    return chain_kernel(method.kind, model.params)(method, model, run, state, out)
 
 
 class _KernelFunction(WrapperAddressProtocol):

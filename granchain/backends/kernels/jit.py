@@ -29,12 +29,6 @@ JIT_INLINE = dict(JIT, inline="always")
 #: Numba lowers it and LLVM optimises and compiles it on the first run like any other code.
 JIT_INTERNAL = dict(JIT, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 
-#: Same flags, for the single-chain entry points: called through their address (a C wrapper) by the
-#: ensemble kernel and by :data:`~granchain.backends.kernels.dispatch.call_kernel`, never by Python
-#: directly, so without the CPython wrapper (its unboxing of five records is compiled once, for
-#: ``call_kernel``, not once per entry point).
-JIT_ENTRY = dict(JIT, no_cpython_wrapper=True)
-
 #: Same flags plus threading, for the ensemble loop (``numba.prange``): that loop alone. With
 #: ``parallel=True`` Numba also turns array expressions and allocations (the ``np.zeros`` of each
 #: realisation's arrays, inside the loop) into parallel loops of their own, which it then runs serially

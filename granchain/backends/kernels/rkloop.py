@@ -29,7 +29,7 @@ from .dense import (
     weights,
 )
 from .forces import accelerations_once, add_potential, contact_force, force_rate, static_state
-from .jit import JIT_ENTRY, JIT_INLINE, JIT_INTERNAL
+from .jit import JIT, JIT_INLINE, JIT_INTERNAL
 from .memory import borrowed, keep_alive
 from .peaks import (
     final_force_peaks,
@@ -180,7 +180,7 @@ def rk_kernel(method, general):
     granchain 0.4.0).
     """
 
-    @njit(**JIT_ENTRY)
+    @njit(**JIT)
     def kernel(record, model, run, state, out):
         """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
         final state) with the Runge-Kutta ``method`` (``records.KIND_DP5``, or ``KIND_RKN4``: the
