@@ -254,6 +254,20 @@ def line(cand: str, m: dict, n: int) -> str:
             f"{failed} [{verdict}]")
 
 
+
+def report_candidates(candidates, chains, labels, refs, where: bool) -> dict:
+    """Measure each (label, integrator) of ``candidates`` on ``chains`` against ``refs`` and print its line
+    (with ``where``: the chain, granule and contact of each worst error); the last measurement."""
+    m = None
+    for cand, integ in candidates:
+        m = measure(integ, chains, refs)
+        print(line(cand, m, len(chains)), flush=True)
+        if where and m["at"][0] is not None:
+            (iv, kv), (it, kt), (i_f, cf) = m["at"]
+            print(f"      velocity: {labels[iv]}, observed granule {kv + 1}; time: {labels[it]}, observed granule "
+                  f"{kt + 1}; force: {labels[i_f]}, {force_peak_context(chains[i_f], *refs[i_f], cf)}", flush=True)
+    return m
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--chains", type=int, default=100, help="random chains per kind (default 100)")
@@ -275,13 +289,7 @@ def main(argv=None):
         print(f"\n{kind}: {len(chains)} chains (DOP853 references in {time.perf_counter() - t0:.0f} s); "
               f"ensemble default {label_of(default)}")
         candidates = candidates_of(kind, default)
-        for cand, integ in candidates:
-            m = measure(integ, chains, refs)
-            print(line(cand, m, len(chains)), flush=True)
-            if args.where and m["at"][0] is not None:
-                (iv, kv), (it, kt), (i_f, cf) = m["at"]
-                print(f"      velocity: {labels[iv]}, observed granule {kv + 1}; time: {labels[it]}, observed granule "
-                      f"{kt + 1}; force: {labels[i_f]}, {force_peak_context(chains[i_f], *refs[i_f], cf)}", flush=True)
+        m = report_candidates(candidates, chains, labels, refs, args.where)
         print(f"  (left out: {m['ended']} peaks at the end of a run, {m['unresolved']} peak times the references do not "
               f"resolve; ties per setting above)")
         if args.tail and kind in PROXY_PAIRS:
@@ -296,14 +304,7 @@ def main(argv=None):
             t0 = time.perf_counter()
             more_refs = references(kind, more, more_labels, args.cache, pair, "-proxy")
             print(f"  (compiled references in {time.perf_counter() - t0:.0f} s)")
-            for cand, integ in candidates:
-                m = measure(integ, more, more_refs)
-                print(line(cand, m, len(more)), flush=True)
-                if args.where and m["at"][0] is not None:
-                    (iv, kv), (it, kt), (i_f, cf) = m["at"]
-                    print(f"      velocity: {more_labels[iv]}, observed granule {kv + 1}; time: {more_labels[it]}, observed "
-                          f"granule {kt + 1}; force: {more_labels[i_f]}, {force_peak_context(more[i_f], *more_refs[i_f], cf)}",
-                          flush=True)
+            report_candidates(candidates, more, more_labels, more_refs, args.where)
     print(f"\nload average after: {os.getloadavg()[0]:.2f}")
 
 
