@@ -264,9 +264,9 @@ def run(args) -> int:
         chains = "both"
     integrator = None
     if args.resume and args.out and all(getattr(args, k) is None for k in ("integrator", "rtol", "atol", "step", "error_control")):
-        from ..ensembles.run import _stored_integrators
+        from ..ensembles.run import stored_integrators
 
-        integrator = _stored_integrators(args.out)  # a store is continued with the integrators it was started with
+        integrator = stored_integrators(args.out)  # a store is continued with the integrators it was started with
     if integrator is None:
         integrator = build_integrator(args, family.chains if chains == "both" else chains, family.contact_law.conservative)
     client = connect(args.scheduler)

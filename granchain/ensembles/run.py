@@ -484,7 +484,7 @@ def _integrator_of(integrator, rtol, atol, windowed: bool = True) -> Integrator 
     return get_integrator(integrator)
 
 
-def _stored_integrators(out):
+def stored_integrators(out):
     """The integrators the store ``out`` was started with, as ``run_ensemble``'s ``integrator`` (one, or a
     dict {chain kind: integrator}): a store is continued as it was started, so one written with earlier
     defaults (granchain 0.4's tolerances were looser) resumes without naming them. None where there is no
@@ -593,7 +593,7 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     if pulse_window is None:  # a store is continued as it was started; a new run gets the windows
         pulse_window = _window.stored_setting(out) if continuing else AUTO
     if integrator is None and rtol is None and atol is None and continuing:
-        integrator = _stored_integrators(out)  # None where there is no store: each kind's default
+        integrator = stored_integrators(out)  # None where there is no store: each kind's default
     integ = _integrator_of(integrator, rtol, atol, windowed=pulse_window == AUTO)
     per_chain = integ if isinstance(integ, dict) else None
     spec = EnsembleSpec(fam, realizations, seed, chains, None if per_chain else integ, t_grid, chunk_size,
