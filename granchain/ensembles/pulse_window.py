@@ -33,7 +33,8 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["PILOT_REALIZATIONS", "SPREAD", "AHEAD", "BUFFER", "AUTO", "FULL", "applies", "window_ends", "check", "stored_setting"]
+__all__ = ["PILOT_REALIZATIONS", "SPREAD", "AHEAD", "BUFFER", "AUTO", "FULL", "applies", "ends_from_arrivals", "keep_until", "window_ends",
+           "check", "stored_setting"]
 
 #: Realisations 0..PILOT_REALIZATIONS-1 of the ensemble (whatever its size: the same draws, so an
 #: ensemble extended later gets the same windows) measure the arrival times the windows are built from.

@@ -96,7 +96,7 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     """Integrate realisations r = 0..R-1 (rows of ``batch``, ``records.Batch``: each struck at granule 1
     with its ``initial_velocity``) with ``method`` by the single-chain entry point ``kernel``
     (``dispatch.kernel_function`` of the entry point ``dispatch.chain_kernel`` picks, for the records of
-    :func:`row_records`), recording what ``run`` asks (its
+    ``row_records``), recording what ``run`` asks (its
     ``exit_margin``, ``max_steps``, ``peak_rtol``, ``observed``, ``t_grid``, ``pulse_end``; the run stops at the
     pulse's exit with ``run.stop_at_exit``, else, successfully, at the row's ``batch.t_max[r]`` (also its
     limit otherwise; ``run.t_max`` is not read): a precompressed chain,
