@@ -26,7 +26,8 @@ def store(tmp_path_factory):
 def test_info_reports_parameters_progress_and_damage(store, tmp_path, capsys):
     assert main(["info", str(store)]) == 0
     out = capsys.readouterr().out
-    for words in ("decorated", "dp5", "20 realisations", "2/2 chunks done", "SUCCESS: 40", "intact"):
+    for words in ("decorated", "dp5", "20 realisations", "2/2 chunks done", "SUCCESS: 40", "intact",
+                  "<v_k(t)> in each granule's window", "the whole grid for the last 5"):
         assert words in out, out
     damaged = tmp_path / "d.zarr"
     shutil.copytree(store, damaged)

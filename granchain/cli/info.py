@@ -81,7 +81,8 @@ def summary(path: str) -> dict:
             "damaged_chunks": damaged or {}, "checksums": checksums, "unreadable": unreadable, "failed_integrations": failures,
             "status_counts": status_counts, "size_bytes": _size(path), "lock": writing,
             # the writer's version is provenance (root attributes); records name it only before results_version
-            "granchain_version": written_by, "results_version": params.get("results_version")}
+            "granchain_version": written_by, "results_version": params.get("results_version"),
+            "pulse_window": params.get("pulse_window")}
 
 
 def _integrator_lines(integ: dict, per_chain: dict | None) -> list:
@@ -93,6 +94,23 @@ def _integrator_lines(integ: dict, per_chain: dict | None) -> list:
     if not per_chain:
         return [line("integrator", integ)]
     return [line("integrator" if i == 0 else "", r) + f"  ({kind} chains)" for i, (kind, r) in enumerate(per_chain.items())]
+
+
+def _pulse_window_line(window: dict | None) -> str:
+    """Where the averaged pulse <v_k(t)> is recorded: in each granule's window (the windowed ensembles),
+    or on the whole time grid."""
+    if not window:
+        return f"{'averaged':<12} <v_k(t)> on the whole time grid"
+    if not window.get("ends"):
+        return f"{'averaged':<12} <v_k(t)> in each granule's window, not set yet (the first run sets them)"
+    parts = []
+    for kind, ends in window["ends"].items():
+        finite = [e for e in ends if e is not None]
+        whole = len(ends) - len(finite)
+        parts.append(f"{kind} chains until t = {min(finite):.4g} .. {max(finite):.4g} (granules 1..{len(finite)}), the "
+                     f"whole grid for the last {whole}" if finite else f"{kind} chains: the whole grid")
+    return (f"{'averaged':<12} <v_k(t)> in each granule's window, NaN after it (set from realisations "
+            f"0..{window.get('pilot_realizations', 64) - 1}; --pulse-window full keeps the whole grid): " + "; ".join(parts))
 
 
 def _contacts_line(family: dict) -> str:
@@ -122,6 +140,7 @@ def run(args) -> int:
         *_integrator_lines(info["integrator"], info.get("chain_integrators")),
         f"run          {info['realizations']} realisations, seed {info['seed']}, chains {', '.join(info['chains'])}, "
         f"chunks of {info['chunk_size']}",
+        _pulse_window_line(info.get("pulse_window")),
         f"progress     {info['chunks_done']}/{info['chunks']} chunks done ({info['realizations_done']} realisations)"
         + (": complete" if info["complete"] else ""),
     ]
