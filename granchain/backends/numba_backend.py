@@ -44,7 +44,7 @@ def kernel_array(a, dtype=float) -> np.ndarray:
 
 
 def _rk_params(integ) -> np.ndarray:
-    """DP5's and RKN4's settings in the layout of ``dispatch._steps``."""
+    """DP5's and RKN4's settings in the layout of ``rkloop.unpack_steps``."""
     return np.array([integ.rtol, integ.atol, integ.first_step, integ.fixed_step or 0.0, integ.relaxed_lag or 0,
                      integ.relaxed_factor, integ.window_lag or 0])
 
