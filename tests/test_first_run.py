@@ -15,6 +15,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pytest
 
 import granchain as gc
 
@@ -128,3 +129,62 @@ def test_a_long_windowed_chain_carries_the_solitary_wave():
     assert abs(res.peak_velocity[1] - ref) > 1e-3  # the wave forms over the first granules
     dt = np.diff(res.peak_time[100:-20])
     assert np.ptp(dt) < 1e-8 * dt.mean(), (dt.min(), dt.max())
+
+
+def test_each_closure_made_by_a_kernel_factory_has_a_name_of_its_own():
+    """Numba names a compiled function's machine code after its qualified name and a per-process
+    counter, and looks up the address of an ensemble's entry point by that name. Two closures of one
+    factory (the entry points of DP5 and RKN4, the root searches, the force routine's calls) that
+    shared a qualified name got the same symbol when both came from the on-disk cache, and the lookup
+    returned the other method's code (the next test). Each must be named for the constants it is
+    compiled for."""
+    from granchain.backends.kernels import dense, dispatch, forces
+
+    groups = [[dispatch.dp5_chain, dispatch.dp5_chain_general, dispatch.rkn4_chain, dispatch.rkn4_chain_general],
+              [dense._acceleration_root, dense._approach_root, dense._force_rate_root],
+              [forces._accelerations_paper, forces._accelerations_general]]
+    for group in groups:
+        names = [f.py_func.__qualname__ for f in group]
+        assert len(set(names)) == len(names), names
+
+
+SWITCH_PROBE = textwrap.dedent(
+    """
+    import json, sys
+    import granchain as gc
+    family = gc.RandomDecorated(6)
+    steps = []
+    for name in sys.argv[1].split(","):
+        integ = {"dp5": gc.DP5.windowed(), "rkn4": gc.RKN4.windowed(1e-6, 1e-9)}[name]
+        ds = gc.run_ensemble(family, realizations=2, seed=1, progress=False, integrator=integ, chains="decorated",
+                             pulse_window="full")
+        alone = gc.simulate(family.chain(1, 0, "decorated"), integ, t_grid=ds["time"].values)
+        steps.append([name, int(ds["n_steps"].isel(chain=0, realization=0)), int(alone.n_steps)])
+    print(json.dumps(steps))
+    """
+)
+
+
+@pytest.mark.slow
+def test_ensembles_run_their_own_method_with_kernels_from_the_cache(tmp_path):
+    """An ensemble integrates every realisation with the method it was given, also when the entry
+    points come from the on-disk cache written by other processes: one process caches RKN4's entry
+    point, another DP5's, and a third that loads both and alternates ensembles of the two must see
+    each ensemble's first realisation take the steps of ``simulate`` with the same integrator (RKN4
+    at DP5's tolerances takes ~2x DP5's steps: the wrong method cannot pass). With the two entry
+    points named alike (before granchain 0.5's fix), the third process's second RKN4 ensemble ran DP5."""
+    import os
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+
+    def run(jobs: str) -> list:
+        out = subprocess.run([sys.executable, "-c", SWITCH_PROBE, jobs], capture_output=True, text=True, check=True,
+                             env=env)
+        return json.loads(out.stdout.splitlines()[-1])
+
+    run("rkn4")
+    run("dp5")
+    results = run("rkn4,dp5,rkn4,dp5")
+    for name, in_ensemble, alone in results:
+        assert in_ensemble == alone, results
+    assert results[0][1] > 1.5 * results[1][1], results  # the two methods are told apart by their steps

@@ -19,7 +19,7 @@ from numba import njit
 
 from . import dp5, rkn4
 from .forces import contact_force, force_rate, law_force
-from .jit import JIT_INLINE, JIT_INTERNAL
+from .jit import JIT_INLINE, JIT_INTERNAL, named
 from .records import KIND_RKN4
 
 #: What :func:`first_root` follows across a step: the acceleration of a granule (its velocity
@@ -136,6 +136,7 @@ def _root_search(what):
     slower (every peak is located by this loop; same-process timings at N = 26)."""
 
     @njit(**JIT_INTERNAL)
+    @named(("acceleration", "approach", "force_rate")[what])
     def search(method, i, f01, step, fm, Q, Qv):
         lo, hi = 0.0, 1.0
         f_lo, f_hi = f01

@@ -25,7 +25,7 @@ import math
 
 from numba import njit
 
-from .jit import JIT, JIT_INLINE, JIT_INTERNAL
+from .jit import JIT, JIT_INLINE, JIT_INTERNAL, named
 from .records import INFO_FROZEN_POTENTIAL, INFO_WINDOW_START
 
 # Fast paths for the contact power delta^(n-1).
@@ -162,6 +162,7 @@ def _accelerations_call(general):
     constant of its code (this closure's variable: Numba prunes the other class's branches)."""
 
     @njit(**JIT_INTERNAL)
+    @named("general" if general else "paper")
     def call(x, v, fm, hi, F, a):
         return accelerations(x, v, fm, hi, F, a, general)
 

@@ -35,3 +35,24 @@ JIT_INTERNAL = dict(JIT, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 #: there: ~0.6 s more compilation of the ensemble kernel and nothing at run time.
 JIT_PARALLEL = dict(JIT, parallel=dict(prange=True, comprehension=False, setitem=False, reduction=False, numpy=False,
                                        stencil=False, fusion=False, inplace_binop=False))
+
+
+def named(tag: str):
+    """Decorator for a function that a factory compiles once per value of its closure's variables:
+    gives each such function a name of its own (``__qualname__`` + "_" + ``tag``) before Numba sees it.
+
+    Numba names a compiled function's machine-code symbols after its qualified name and a counter of
+    the process that compiled it, and keeps its cache files under the qualified name. Two closures of
+    one factory share the qualified name, and when both are loaded from the cache, compiled by two
+    processes, their counters can be equal too: the same symbol twice. The address of an entry point
+    is looked up by that name (``dispatch.kernel_function``: the ensemble kernel ran the RKN4 entry
+    point's code for a DP5 ensemble, or the other way round, after both had been loaded from the
+    cache), and a kernel that links two such helpers (the root searches) keeps one of them. With a name
+    per closure the symbols differ and each closure also gets cache files of its own."""
+
+    def rename(func):
+        func.__qualname__ = f"{func.__qualname__}_{tag}"
+        func.__name__ = f"{func.__name__}_{tag}"
+        return func
+
+    return rename

@@ -52,7 +52,9 @@ LAST = 3
 @njit(**JIT_INLINE)
 def stages(x, v, Kv, xs, vs, h, hi, fm, F, general):
     """Stages 1..3 of one step over granules 0..hi-1 (``Kv[0]`` holds f(x)); on return ``xs``, ``vs``
-    hold the new state and ``Kv[3]`` the force per mass there (three force evaluations)."""
+    hold the new state and ``Kv[3]`` the force per mass there (three force evaluations), also copied
+    to ``Kv[6]``, where the step loop reads a step's end (as DP5's last stage; slot 3 is then free for
+    the dense output, which :func:`dense_data` lays out only for the steps that need it)."""
     h2 = h * h
     for s in range(1, 4):  # one call of the force routine below, so that it is inlined once
         if s == 1:
@@ -67,6 +69,7 @@ def stages(x, v, Kv, xs, vs, h, hi, fm, F, general):
         accelerations(xs, v, fm, hi, F, Kv[s], general)  # forces of positions only: v unread
     for i in range(hi):
         vs[i] = v[i] + h * (P0 * Kv[0, i] + P1 * Kv[1, i] + P2 * Kv[2, i] + P3 * Kv[3, i])
+        Kv[6, i] = Kv[3, i]  # the step's end, where the step loop reads it (slot 3 is the dense output's)
 
 
 @njit(**JIT_INLINE)
@@ -88,17 +91,18 @@ def error_ratios(x, v, xs, vs, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
 
 @njit(**JIT_INLINE)
 def dense_data(x, v, xs, vs, Kx, Kv, h, hi):
-    """After an accepted step: the quintic Hermite interpolant through (x, v, a = Kv[0]) and (xs, vs,
-    a' = Kv[3]) in the slots of the stage arrays, for :func:`hermite_weights`:
+    """After an accepted step that needs its dense output (a root or a grid sample in it): the quintic
+    Hermite interpolant through (x, v, a = Kv[0]) and (xs, vs, a' = Kv[3]) in the slots of the stage
+    arrays, for :func:`hermite_weights`:
 
     Kx = [v, (x' - x)/h, h a, h a', 0, 0, v'], so that x(t + theta h) = x + h sum_s Kx[s] Qx[s];
     Kv = [a, (x' - x)/h^2, v/h, v'/h, *, *, a'], so that v(t + theta h) = v + h sum_s Kv[s] Qv[s].
 
-    Slot 6 holds v' and a' as in DP5 (the next step's slot 0, and what the peak and contact
-    candidate tests read at the step's end). Not written: Kx[0], which already holds v (the step
-    loop keeps it so), and slots 4 and 5, whose weights are exactly 0 (Kx[4], Kx[5] are never written
-    by RKN4: zeros; Kv[4], Kv[5] are never written by it either). Kv[3] (a') is read before slot 3
-    is overwritten."""
+    Slot 6 holds v' and a' as in DP5 (a' is already there: :func:`stages`). Not written: Kx[0], which
+    already holds v (the step loop keeps it so), Kv[6], and slots 4 and 5, whose weights are exactly 0
+    (Kx[4], Kx[5] are never written by RKN4: zeros; Kv[4], Kv[5] are never written by it either).
+    Kv[3] (a') is read before slot 3 is overwritten. The step loop reads v' from ``xs``, not Kx[6],
+    for the steps without it (the same numbers)."""
     ih = 1.0 / h
     for i in range(hi):
         a1 = Kv[LAST, i]
@@ -110,7 +114,6 @@ def dense_data(x, v, xs, vs, Kx, Kv, h, hi):
         Kv[1, i] = dx * ih * ih
         Kv[2, i] = v[i] * ih
         Kv[3, i] = vs[i] * ih
-        Kv[6, i] = a1
 
 
 @njit(**JIT_INTERNAL)
