@@ -101,7 +101,7 @@ def dense_data(x, v, xs, vs, Kx, Kv, h, hi):
     Slot 6 holds v' and a' as in DP5 (a' is already there: :func:`stages`). Not written: Kx[0], which
     already holds v (the step loop keeps it so), Kv[6], and slots 4 and 5, whose weights are exactly 0
     (Kx[4], Kx[5] are never written by RKN4: zeros; Kv[4], Kv[5] are never written by it either).
-    Kv[3] (a') is read before slot 3 is overwritten. The step loop reads v' from ``xs``, not Kx[6],
+    Kv[3] (a') is read before slot 3 is overwritten. The step loop reads v' from ``vs``, not Kx[6],
     for the steps without it (the same numbers)."""
     ih = 1.0 / h
     for i in range(hi):
