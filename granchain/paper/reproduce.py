@@ -100,7 +100,7 @@ def _find(records, prefix):
     return [r for r in records if r.quantity.startswith(prefix)]
 
 
-def stored_integrators(ds) -> dict:
+def _integrator_records(ds) -> dict:
     """{chain kind: integrator record} of a store (one record for every kind unless they differ)."""
     params = stored_record(ds, "parameters")
     return params.get("chain_integrators") or {kind: params["integrator"] for kind in params["chains"]}
@@ -238,7 +238,7 @@ def reproduce(out="granchain-results", realizations: int = 30_000, quick: bool =
     records = build_records(datasets, figs, sums_by_N)
     ds0 = next(iter(datasets.values()))
     meta = {"realizations": realizations, "Ns": list(Ns), "alpha": 0.01, "beta": 0.4, "rtol": float(ds0.attrs["rtol"]),
-            "atol": float(ds0.attrs["atol"]), "integrators": stored_integrators(ds0), "quick": quick, "seed": seed, "wall_time_s": time.perf_counter() - t0,
+            "atol": float(ds0.attrs["atol"]), "integrators": _integrator_records(ds0), "quick": quick, "seed": seed, "wall_time_s": time.perf_counter() - t0,
             "granchain_version": __version__}
     md, html_path = write_report(out, records, meta, figs)
     (out / "summary.json").write_text(json.dumps({"meta": meta, "records": [r.to_json() for r in records]}, indent=1))
