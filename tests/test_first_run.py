@@ -188,3 +188,97 @@ def test_ensembles_run_their_own_method_with_kernels_from_the_cache(tmp_path):
     for name, in_ensemble, alone in results:
         assert in_ensemble == alone, results
     assert results[0][1] > 1.5 * results[1][1], results  # the two methods are told apart by their steps
+
+
+def test_the_command_line_says_when_it_compiles():
+    """A first run spends 10-20 s compiling: the command line says so on stderr when the compilation
+    starts and how long it took at the end. Nothing once the function is compiled (nothing to compile
+    in this process: the negative control), and nothing with ``quiet``."""
+    import io
+
+    from numba import njit
+
+    from granchain.cli._compile import compile_notice
+
+    @njit(cache=False)
+    def twice(x):
+        return 2.0 * x
+
+    stream = io.StringIO()
+    with compile_notice(stream):
+        assert twice(1.5) == 3.0
+        twice(2.5)  # compiled already: one announcement
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 2, lines
+    assert lines[0].startswith("granchain: compiling the kernels this command uses")
+    assert lines[1].startswith("granchain: ") and "s of this run went into compiling" in lines[1]
+    assert float(lines[1].split()[1]) >= 0.0
+
+    again = io.StringIO()
+    with compile_notice(again):
+        twice(3.5)
+    assert again.getvalue() == ""
+
+    @njit(cache=False)
+    def thrice(x):
+        return 3.0 * x
+
+    quiet = io.StringIO()
+    with compile_notice(quiet, quiet=True):
+        assert thrice(1.0) == 3.0
+    assert quiet.getvalue() == ""
+
+
+WARM_PROBE = textwrap.dedent(
+    """
+    import json
+    from numba.core import event
+    from granchain.backends.kernels import dispatch, warm
+    compiled = []
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            compiled.append(ev.data["dispatcher"].py_func.__qualname__)
+
+        def on_end(self, ev):
+            pass
+
+    before = warm.is_cached(dispatch.dp5_chain)
+    helper = warm.compile_elsewhere("dp5")
+    started = helper is not None
+    code = helper.wait() if started else None
+    after = warm.is_cached(dispatch.dp5_chain)
+    again = warm.compile_elsewhere("dp5")
+    event.register("numba:compile", Listener())
+    import granchain as gc
+    gc.run_ensemble(6, realizations=2, chains="effective", progress=False)
+    print(json.dumps([before, started, code, after, again is None, compiled]))
+    """
+)
+
+
+@pytest.mark.slow
+def test_a_helper_process_compiles_dp5_into_the_cache(tmp_path):
+    """The paper's first run compiles DP5's entry point in a helper process while it compiles RKN4's:
+    with an empty cache the helper is started, and once it is done DP5 is in the cache, no second
+    helper starts, and an ensemble of effective chains loads DP5 from there instead of compiling it
+    (it compiles only the ensemble kernel). Before the helper, the cache is empty (the check can fail)."""
+    import os
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    out = subprocess.run([sys.executable, "-c", WARM_PROBE], capture_output=True, text=True, check=True, env=env)
+    before, started, code, after, none_again, compiled = json.loads(out.stdout.splitlines()[-1])
+    assert (before, started, code, after, none_again) == (False, True, 0, True, True)
+    assert not any("kernel_dp5" in name for name in compiled), compiled
+    assert any("integrate_batch" in name for name in compiled), compiled
+
+
+def test_no_helper_process_once_dp5_is_cached():
+    """With DP5's entry point cached (compiled by this test session), no helper process is started,
+    and stopping no helper is a no-op."""
+    from granchain.backends.kernels import dispatch, warm
+
+    gc.simulate(gc.effective(gc.decorated([0.05, 0.3, 0.012])))
+    assert warm.is_cached(dispatch.dp5_chain)
+    assert warm.compile_elsewhere("dp5") is None
+    warm.stop(None)

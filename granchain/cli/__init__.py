@@ -66,8 +66,11 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     warnings.showwarning = _warning_to_stderr
+    from ._compile import compile_notice
+
     try:
-        return int(args.func(args) or 0)
+        with compile_notice(quiet=bool(getattr(args, "quiet", False))):
+            return int(args.func(args) or 0)
     except ValueError as exc:
         print(f"granchain {args.command}: error: {exc}", file=sys.stderr)
         return 2
