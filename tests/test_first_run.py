@@ -72,7 +72,9 @@ def test_simulate_and_an_ensemble_share_the_compiled_kernel():
     assert used == {"dp5_chain": 1, "integrate_batch": 1}
 
 
-CACHE_PROBE = textwrap.dedent(
+#: A probe's preamble: ``compiled`` collects the qualified names of the functions Numba compiles from
+#: the moment ``listen()`` is called (the ``numba:compile`` event: a cache load does not trigger it).
+LISTEN = textwrap.dedent(
     """
     import json
     from numba.core import event
@@ -85,7 +87,14 @@ CACHE_PROBE = textwrap.dedent(
         def on_end(self, ev):
             pass
 
-    event.register("numba:compile", Listener())
+    def listen():
+        event.register("numba:compile", Listener())
+    """
+)
+
+CACHE_PROBE = LISTEN + textwrap.dedent(
+    """
+    listen()
     import granchain as gc
     small = gc.decorated([0.05, 0.3, 0.012])
     gc.simulate(small)
@@ -229,27 +238,17 @@ def test_the_command_line_says_when_it_compiles():
     assert quiet.getvalue() == ""
 
 
-WARM_PROBE = textwrap.dedent(
+WARM_PROBE = LISTEN + textwrap.dedent(
     """
-    import json
-    from numba.core import event
-    from granchain.backends.kernels import dispatch, warm
-    compiled = []
-
-    class Listener(event.Listener):
-        def on_start(self, ev):
-            compiled.append(ev.data["dispatcher"].py_func.__qualname__)
-
-        def on_end(self, ev):
-            pass
-
+    from granchain.backends import warm
+    from granchain.backends.kernels import dispatch
     before = warm.is_cached(dispatch.dp5_chain)
     helper = warm.compile_elsewhere("dp5")
     started = helper is not None
     code = helper.wait() if started else None
     after = warm.is_cached(dispatch.dp5_chain)
     again = warm.compile_elsewhere("dp5")
-    event.register("numba:compile", Listener())
+    listen()
     import granchain as gc
     gc.run_ensemble(6, realizations=2, chains="effective", progress=False)
     print(json.dumps([before, started, code, after, again is None, compiled]))
@@ -276,7 +275,8 @@ def test_a_helper_process_compiles_dp5_into_the_cache(tmp_path):
 def test_no_helper_process_once_dp5_is_cached():
     """With DP5's entry point cached (compiled by this test session), no helper process is started,
     and stopping no helper is a no-op."""
-    from granchain.backends.kernels import dispatch, warm
+    from granchain.backends import warm
+    from granchain.backends.kernels import dispatch
 
     gc.simulate(gc.effective(gc.decorated([0.05, 0.3, 0.012])))
     assert warm.is_cached(dispatch.dp5_chain)

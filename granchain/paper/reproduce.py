@@ -32,7 +32,7 @@ def ensemble_path(out: Path, N: int) -> Path:
 def run_ensembles(out: Path, realizations: int, seed: int, Ns=PAPER_N, alpha=0.01, beta=0.4, client=None, progress=True,
                   chunk_size=None, log=print) -> dict:
     """One resumable ensemble per chain length; chain length N uses seed ``1000 * seed + N``."""
-    from ..backends.kernels import warm
+    from ..backends import warm
 
     dist = Uniform(alpha, beta)
     datasets = {}

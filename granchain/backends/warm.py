@@ -28,7 +28,7 @@ JOBS = {
 
 
 def _entry_point(job: str):
-    from .dispatch import dp5_chain
+    from .kernels.dispatch import dp5_chain
 
     return {"dp5": dp5_chain}[job]
 
@@ -53,7 +53,7 @@ def compile_elsewhere(job: str = "dp5") -> subprocess.Popen | None:
     # The helper imports this very granchain: the directory this one is imported from goes first on its
     # path unless it is there, and the working directory (which may hold another checkout) stays off it
     # (-P, Python >= 3.11; before, the helper runs in that directory instead).
-    root = str(Path(__file__).resolve().parents[3])
+    root = str(Path(__file__).resolve().parents[2])
     code = f"import sys\nif {root!r} not in sys.path:\n    sys.path.insert(0, {root!r})\n{JOBS[job]}\n"
     safe_path = sys.version_info >= (3, 11)
     try:
