@@ -245,7 +245,8 @@ WARM_PROBE = LISTEN + textwrap.dedent(
     before = warm.is_cached(dispatch.dp5_chain)
     helper = warm.compile_elsewhere("dp5")
     started = helper is not None
-    code = helper.wait() if started else None
+    warm.wait_for(dispatch.dp5_chain)  # as an ensemble does before it compiles DP5 itself
+    code = helper.poll() if started else None
     after = warm.is_cached(dispatch.dp5_chain)
     again = warm.compile_elsewhere("dp5")
     listen()
@@ -259,8 +260,8 @@ WARM_PROBE = LISTEN + textwrap.dedent(
 @pytest.mark.slow
 def test_a_helper_process_compiles_dp5_into_the_cache(tmp_path):
     """The paper's first run compiles DP5's entry point in a helper process while it compiles RKN4's:
-    with an empty cache the helper is started, and once it is done DP5 is in the cache, no second
-    helper starts, and an ensemble of effective chains loads DP5 from there instead of compiling it
+    with an empty cache the helper is started, ``wait_for`` (what an ensemble calls before it would
+    compile DP5) returns once the helper is done, DP5 is then in the cache, no second helper starts, and an ensemble of effective chains loads DP5 from there instead of compiling it
     (it compiles only the ensemble kernel). Before the helper, the cache is empty (the check can fail)."""
     import os
 
@@ -282,3 +283,28 @@ def test_no_helper_process_once_dp5_is_cached():
     assert warm.is_cached(dispatch.dp5_chain)
     assert warm.compile_elsewhere("dp5") is None
     warm.stop(None)
+
+
+def test_ensembles_start_the_helper_only_where_dp5_comes_second(monkeypatch):
+    """``run_ensemble`` asks for a helper compiling DP5 (the paper's chain) when it integrates another
+    method first and DP5 later, on this machine: the defaults for both chains of the paper's family.
+    Not for one chain kind, DP5 for all, real contacts (another entry point) or a cluster."""
+    from granchain.ensembles import run as run_module
+    from granchain.ensembles.run import EnsembleSpec
+
+    asked = []
+    monkeypatch.setattr(run_module.warm, "compile_elsewhere", lambda job: asked.append(job))
+
+    def asks(family, client=None, **kw) -> bool:
+        asked.clear()
+        run_module._compile_ahead(EnsembleSpec(family, 10, **kw), client)
+        return asked == ["dp5"]
+
+    paper = gc.RandomDecorated(6)
+    assert asks(paper)
+    assert not asks(paper, chains="decorated")
+    assert not asks(paper, chains="effective")
+    assert not asks(paper, integrator=gc.DP5.windowed(1e-8, 1e-11))
+    assert asks(paper, chain_integrators={"decorated": gc.RKN4.windowed(), "effective": gc.DP5()})
+    assert not asks(paper, client=object())
+    assert not asks(gc.RandomDecorated(6, contact=gc.Viscoelastic(0.05)))

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.contacts import PowerLaw, Viscoelastic
-from . import Backend, aligned_outputs, batch_chain, effective_integrator
+from . import Backend, aligned_outputs, batch_chain, effective_integrator, warm
 from .kernels.batch import integrate_batch, row_records, thread_sums
 from .kernels.dispatch import chain_kernel, integrate_chain, kernel_function
 from .kernels.forces import power_code
@@ -144,7 +144,9 @@ class NumbaBackend(Backend):
         rows = Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
                     out["status"], out["energy_error"], out["n_steps"], out["t_end"],
                     out["dissipated_energy"] if "dissipated_energy" in out else np.zeros(masses.shape[0]))
-        kernel = kernel_function(chain_kernel(method.kind, params), *row_records(batch, method, run, rows))
+        entry = chain_kernel(method.kind, params)
+        warm.wait_for(entry)  # a helper process compiling it into the cache (a first run of both chains)
+        kernel = kernel_function(entry, *row_records(batch, method, run, rows))
         with numba.parallel_chunksize(1):
             integrate_batch(
                 kernel, batch, method, run, Tally(contacts, float(scale), lags), rows,

@@ -32,23 +32,15 @@ def ensemble_path(out: Path, N: int) -> Path:
 def run_ensembles(out: Path, realizations: int, seed: int, Ns=PAPER_N, alpha=0.01, beta=0.4, client=None, progress=True,
                   chunk_size=None, log=print) -> dict:
     """One resumable ensemble per chain length; chain length N uses seed ``1000 * seed + N``."""
-    from ..backends import warm
-
     dist = Uniform(alpha, beta)
     datasets = {}
-    # A first run compiles RKN4 (decorated chains) and DP5 (effective ones): on a second core, DP5 in a
-    # helper process meanwhile (none with a cluster, whose workers compile for themselves).
-    helper = warm.compile_elsewhere("dp5") if client is None else None
-    try:
-        for i, N in enumerate(Ns, 1):
-            path = ensemble_path(out, N)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            log(f"[ensemble {i}/{len(Ns)}] N = {N}: {realizations} realisations, decorated + effective -> {path}")
-            cs = chunk_size or max(50, min(1000, -(-realizations // 8)))
-            datasets[N] = run_ensemble(N, dist, realizations, 1000 * seed + N, "both", t_grid=default_time_grid(N),
-                                       chunk_size=cs, out=path, resume=True, client=client, progress=progress)
-    finally:
-        warm.stop(helper)
+    for i, N in enumerate(Ns, 1):
+        path = ensemble_path(out, N)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        log(f"[ensemble {i}/{len(Ns)}] N = {N}: {realizations} realisations, decorated + effective -> {path}")
+        cs = chunk_size or max(50, min(1000, -(-realizations // 8)))
+        datasets[N] = run_ensemble(N, dist, realizations, 1000 * seed + N, "both", t_grid=default_time_grid(N),
+                                   chunk_size=cs, out=path, resume=True, client=client, progress=progress)
     return datasets
 
 
