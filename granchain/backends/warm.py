@@ -21,10 +21,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-#: What a helper runs for each job: the smallest run that compiles the entry point for the argument
-#: types every run passes it (``simulate`` and the ensemble kernel share one signature).
+#: For each job, the entry point it compiles (its name in ``kernels.dispatch``) and what the helper runs:
+#: the smallest run that compiles it for the argument types every run passes it (``simulate`` and the
+#: ensemble kernel share one signature).
 JOBS = {
-    "dp5": "import granchain as gc; gc.simulate(gc.effective(gc.decorated([0.05, 0.3, 0.012])))",
+    "dp5": ("dp5_chain", "import granchain as gc; gc.simulate(gc.effective(gc.decorated([0.05, 0.3, 0.012])))"),
 }
 
 
@@ -37,9 +38,9 @@ WAIT_LIMIT = 120.0
 
 
 def _entry_point(job: str):
-    from .kernels.dispatch import dp5_chain
+    from .kernels import dispatch
 
-    return {"dp5": dp5_chain}[job]
+    return getattr(dispatch, JOBS[job][0])
 
 
 def is_cached(kernel) -> bool:
@@ -63,7 +64,7 @@ def compile_elsewhere(job: str = "dp5") -> subprocess.Popen | None:
     # path unless it is there, and the working directory (which may hold another checkout) stays off it
     # (-P, Python >= 3.11; before, the helper runs in that directory instead).
     root = str(Path(__file__).resolve().parents[2])
-    code = f"import sys\nif {root!r} not in sys.path:\n    sys.path.insert(0, {root!r})\n{JOBS[job]}\n"
+    code = f"import sys\nif {root!r} not in sys.path:\n    sys.path.insert(0, {root!r})\n{JOBS[job][1]}\n"
     safe_path = sys.version_info >= (3, 11)
     try:
         proc = subprocess.Popen([sys.executable, *(["-P"] if safe_path else []), "-c", code],

@@ -12,11 +12,13 @@ import sys
 import time
 from contextlib import contextmanager
 
+from numba.core import event
 
-class _Notice:
-    """What a Numba event listener does (:func:`compile_notice` makes it one): the first compilation
-    prints one line, and :meth:`summary` gives the time spent compiling. Compilations nest (a kernel
-    compiles the helpers it calls); only the outermost are timed."""
+
+class _Notice(event.Listener):
+    """A listener of Numba's ``numba:compile`` events: the first compilation prints one line, and
+    :meth:`summary` gives the time spent compiling. Compilations nest (a kernel compiles the helpers
+    it calls); only the outermost are timed."""
 
     def __init__(self, stream):
         self.stream = stream
@@ -53,12 +55,7 @@ def compile_notice(stream=None, quiet: bool = False):
     if quiet:
         yield None
         return
-    from numba.core import event
-
-    class Listener(_Notice, event.Listener):  # numba imported here: the CLI's help does not load it
-        pass
-
-    notice = Listener(sys.stderr if stream is None else stream)
+    notice = _Notice(sys.stderr if stream is None else stream)
     with event.install_listener("numba:compile", notice):
         try:
             yield notice
