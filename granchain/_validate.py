@@ -7,7 +7,9 @@ bad value is reported once, by name, with the allowed range.
 from __future__ import annotations
 
 import math
+import os
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -95,3 +97,39 @@ def warn_effective_validity(max_ratio: float, *, what: str, stacklevel: int = 3)
             EffectiveValidityWarning,
             stacklevel=stacklevel,
         )
+
+
+def output_directory(out, name: str = "out", *, create: bool = True) -> Path:
+    """``out`` as a writable directory (created if missing), checked before anything runs: a run that
+    could not save its first result would otherwise fail after minutes of work. ``name`` is what the
+    message calls it (``--out`` on the command line); ``create=False`` checks that it can be created
+    and leaves nothing behind (for a check before the other arguments are)."""
+    try:
+        text = os.fspath(out)
+    except TypeError:
+        raise ValueError(f"{name} must be a directory path (str or pathlib.Path), got {out!r}") from None
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    if not text.strip():
+        raise ValueError(f"{name} must be a directory path such as results, got an empty string")
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{name} = {path} is an existing file, not a directory: choose another path")
+    missing, existing = [], path.absolute()
+    while not existing.exists():  # the folders to create, innermost first
+        missing.append(existing)
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{name} = {path}: cannot create its folder ({existing} is a file); choose another path")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{name} = {path} cannot be written ({existing} is not a writable directory); "
+                         "choose a writable directory")
+    if missing:
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ValueError(f"{name} = {path}: cannot create it ({exc.strerror}); choose a writable directory") from None
+        if not create:
+            for folder in missing:
+                folder.rmdir()
+    return path

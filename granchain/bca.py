@@ -92,6 +92,16 @@ def _positive(name: str, value) -> np.ndarray:
     return a
 
 
+def _alpha_beta(alpha, beta) -> tuple[float, float]:
+    """The bounds of a uniform small-radius law: 0 < alpha < beta <= 1 (radii in units of the large one)."""
+    a = finite_scalar("alpha", alpha)
+    b = finite_scalar("beta", beta)
+    if not 0.0 < a < b <= 1.0:
+        raise ValueError(f"need 0 < alpha < beta <= 1 (small radii uniform on [alpha, beta], in units of the large "
+                         f"radius; alpha = 0 would make X = R^(-1/2n) unbounded), got alpha = {a!r}, beta = {b!r}")
+    return a, b
+
+
 def _quarter_period(n: float) -> float:
     """int_0^1 du / sqrt(1 - u^n) = sqrt(pi) Gamma(1+1/n) / Gamma(1/2+1/n)."""
     return math.sqrt(math.pi) * math.gamma(1.0 + 1.0 / n) / math.gamma(0.5 + 1.0 / n)
@@ -256,7 +266,8 @@ def slope_uniform(alpha: float, beta: float, n=HERTZ, m: float = 1.0) -> float:
     S(0.01, 0.4) = 2.3482 for n = 5/2 (paper: 2.348).
     """
     n = _bca_n(n)
-    d = small_radius_distribution(Uniform(alpha, beta), stacklevel=2)  # validates alpha < beta <= 1, warns above 0.4
+    alpha, beta = _alpha_beta(alpha, beta)
+    d = small_radius_distribution(Uniform(alpha, beta), stacklevel=2)  # warns above 0.4
     m = finite_scalar("m", m, positive=True)
     p = 1.0 - 1.0 / (2.0 * n)
     return 2 * n * A(n) / (2 * n - 1) * (m / 2**1.5) ** (1 / n) * (d.beta**p - d.alpha**p) / (d.beta - d.alpha)  # Eq. (slope)
@@ -292,10 +303,7 @@ class XDistribution:
     n: float = HERTZ
 
     def __post_init__(self):
-        a = finite_scalar("alpha", self.alpha)
-        b = finite_scalar("beta", self.beta)
-        if not 0.0 < a < b <= 1.0:
-            raise ValueError(f"need 0 < alpha < beta <= 1, got alpha = {a!r}, beta = {b!r}")
+        a, b = _alpha_beta(self.alpha, self.beta)
         object.__setattr__(self, "alpha", a)
         object.__setattr__(self, "beta", b)
         object.__setattr__(self, "n", _bca_n(self.n))
@@ -432,7 +440,7 @@ def monte_carlo_arrival_times(size: int = 26, distribution=None, realizations=30
             idx = np.arange(count("realizations", realizations, minimum=1))
         else:
             idx = np.asarray(realizations, dtype=np.int64).reshape(-1)
-        seed = int(seed)
+        seed = count("seed", seed, minimum=0)
         if stream == "per-realization":
             r = draw_small_radii(d, N - 1, seed, idx)
         elif stream == "single":

@@ -54,6 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._cache import user_cache_dir
 from ._validate import count, exponent
 from ._version import __version__
 from .model.chain import HERTZ
@@ -254,12 +255,9 @@ _MEMORY: dict = {}
 
 
 def cache_dir() -> Path:
-    """Where tables are kept between sessions: $GRANCHAIN_CACHE, else the user cache directory."""
-    env = os.environ.get("GRANCHAIN_CACHE")
-    if env:
-        return Path(env) / "theory"
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-    return base / "granchain" / "theory"
+    """Where tables are kept between sessions: ``theory`` under granchain's per-user cache directory
+    ($GRANCHAIN_CACHE, else $XDG_CACHE_HOME or ~/.cache, then ``granchain``: ``granchain._cache``)."""
+    return user_cache_dir() / "theory"
 
 
 def clear_cache(disk: bool = False) -> None:
@@ -472,6 +470,33 @@ def averaged_pulse(peak, times, profiles, n: float = HERTZ, *, points: int = 201
 
 
 # --------------------------------------------------------------------------- the public prediction
+#: Largest samples x N of one prediction. The Monte Carlo keeps :data:`MC_ARRAYS` arrays of samples x N
+#: numbers of 8 bytes (nodes, log-peaks, peaks, times, steps), and the averaged pulse interpolates every
+#: sample at 201 times per granule: 5e7 is ~2 GB and a few minutes on one core (the default, 20000 x 26,
+#: is 5.2e5: a few seconds once the tables are cached).
+MAX_WORK = 50_000_000
+MC_ARRAYS = 5
+
+
+def check_work(n_large: int, samples: int) -> None:
+    """Refuse a prediction whose Monte Carlo would not fit in memory or would run for hours, before any
+    table is built: samples x N at most :data:`MAX_WORK` and its arrays within half this machine's memory."""
+    need = MC_ARRAYS * 8 * samples * n_large
+    try:
+        half = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
+    except (AttributeError, ValueError, OSError):  # pragma: no cover -- no sysconf (Windows)
+        half = None
+    too_much = samples * n_large > MAX_WORK or (half is not None and need > half)
+    if too_much:
+        room = f" (half this machine's memory is {half / 2**30:.3g} GiB)" if half is not None else ""
+        raise ValueError(
+            f"N = {n_large} large granules x samples = {samples} Monte Carlo samples is too large a prediction: its arrays "
+            f"need ~{need / 2**30:.3g} GiB{room} and its averaged pulse ~N x samples x 201 interpolations; keep N x samples "
+            f"<= {MAX_WORK:.0e} ("
+            + (f"with samples = {samples}: N <= {MAX_WORK // samples}): lower n_large (CLI: --large) or samples (CLI: --samples)"
+               if MAX_WORK // samples >= 2 else f"samples <= {MAX_WORK // 2} even for N = 2): lower samples (CLI: --samples)"))
+
+
 def _check_distribution(distribution):
     if distribution is None:
         raise ValueError("distribution is required: a granchain.Uniform(alpha, beta), Truncated, Mixture or a frozen "
@@ -522,10 +547,12 @@ def predict(distribution, n_large: int, n: float = HERTZ, *, samples: int = 20_0
     settings = TheorySettings(memory, lookahead, nodes, n, bool(stiffness_disorder))
     dist = _check_distribution(distribution)
     samples = count("samples", samples, minimum=100)
-    mc = sample_pulses(dist, N, settings, samples, count("seed", seed, minimum=0), cache=cache)
+    seed = count("seed", seed, minimum=0)
+    profile_windows = count("profile_windows", profile_windows, minimum=10)  # all checked before any table is built
+    check_work(N, samples)
+    mc = sample_pulses(dist, N, settings, samples, seed, cache=cache)
     P, T = mc["peak"], mc["time"]
-    profiles = aligned_profiles(dist, N, settings, windows=count("profile_windows", profile_windows, minimum=10),
-                                seed=int(seed), cache=cache)
+    profiles = aligned_profiles(dist, N, settings, windows=profile_windows, seed=seed, cache=cache)
     vavg, tavg = averaged_pulse(P, T, profiles, settings.n)
     tabulation = sum(tab.seconds for tab in mc["tables"].values())
     R, w = stiffness_quadrature(dist, settings.nodes)

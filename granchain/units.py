@@ -151,7 +151,15 @@ def si_value(value, kind: str, name: str = "value", *, unit: str | None = None) 
     N m^(1/2 - n)). Raises ValueError naming ``name``, the dimension it needs and the one it
     got ("--radius needs a length, got 5 s (a time)") or the unit pint does not know.
     """
-    if kind not in DIMENSIONS and unit is None:
+    x = _si_value(value, kind, name, unit)
+    if not math.isfinite(x):
+        raise ValueError(f"{name} must be finite, got {value!r}: a physical quantity (a size, a speed, a force, ...) "
+                         "is a finite number")
+    return x
+
+
+def _si_value(value, kind: str, name: str, unit: str | None) -> float:
+    if not isinstance(kind, str) or (kind not in DIMENSIONS and unit is None):
         raise ValueError(f"unknown kind of quantity {kind!r}; choose one of {', '.join(DIMENSIONS)}")
     target = DIMENSIONS.get(kind, "") if unit is None else unit
     if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
@@ -336,7 +344,7 @@ class Scale:
 
     def to_si(self, value, kind: str):
         """``value`` (rescaled, scalar or array) times the unit of ``kind`` (one of :data:`~granchain.units.QUANTITIES`)."""
-        if kind not in SI_UNITS:
+        if not isinstance(kind, str) or kind not in SI_UNITS:
             raise ValueError(f"unknown quantity {kind!r}; choose one of {', '.join(QUANTITIES)}")
         return value * getattr(self, kind)
 
@@ -345,7 +353,7 @@ class Scale:
         as ``"2 N"``, ``"5 g"``, ``"1 m/s"``, ``"2 us"``) in the paper's rescaled units: what a static
         force, a striker's mass or a damping time is in the units the chains are integrated in
         (``scale.to_rescaled("2 N", "force")``). The inverse of :meth:`to_si`."""
-        if kind not in SI_UNITS:
+        if not isinstance(kind, str) or kind not in SI_UNITS:
             raise ValueError(f"unknown quantity {kind!r}; choose one of {', '.join(QUANTITIES)}")
         word = {"velocity": "speed", "radius": "length"}.get(kind, kind)
         return si_value(value, word, f"a {kind}") / getattr(self, kind)

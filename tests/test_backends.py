@@ -3,7 +3,7 @@ two promises of the grouped kernel records.
 
 1. Conformance. A short list of chains (monodisperse, a fixed and a random decorated chain, the
    random one's effective chain, a general exponent n = 3, decorated and monodisperse chains ending
-   in a rigid wall) runs through every integrator in ``granchain.solve.integrators.INTEGRATORS`` (so a
+   in a fixed wall) runs through every integrator in ``granchain.solve.integrators.INTEGRATORS`` (so a
    new one is picked up, and fails until it is given a case with its tolerances) and is compared
    with SciPy's DOP853 at rtol 1e-11: status, peak velocities and times, velocities on a time grid,
    energy, momentum (or, with a wall, the wall's impulse) and the stop event. Tolerances are scaled
@@ -272,7 +272,7 @@ GOAL = goal_variants()
 @pytest.mark.parametrize("integ", [i for _, i in GOAL], ids=[n for n, _ in GOAL])
 def test_effective_integrator_switches_goal_zones_off_at_a_wall(integ):
     """A wall sends the pulse back through the granules behind the front, so the relaxed zone and
-    the trailing window are switched off there (``RigidWall.licenses_goal_control``): the effective
+    the trailing window are switched off there (``FixedWall.licenses_goal_control``): the effective
     integrator is the exact method with the same tolerances. A free end leaves them on (the
     integrator itself)."""
     assert integ.goal_oriented and integ.relaxed_lag is not None
@@ -467,7 +467,7 @@ MODEL_FIELD_SCRIPT = textwrap.dedent(
     # ... and the one place that fills it.
     def model_params(chain):
         return New(float(chain.n), power_code(chain.n), chain.boundary.wall, float(chain.contact.gamma),
-                   float(chain.static_force), PROBE)
+                   float(chain.static_force), bool(getattr(chain.contact, "clamp", True)), PROBE)
     numba_backend.model_params = model_params
 
     extended = {name: run(i) for name, i in INTEGRATORS.items()}
@@ -556,10 +556,10 @@ def test_a_new_params_field_compiles_and_reaches_the_forces(tmp_path):
     shutil.copytree(Path(gc.__file__).parent, root / "granchain", ignore=shutil.ignore_patterns("__pycache__"))
     kernels = root / "granchain" / "backends"
     edits = {
-        kernels / "kernels" / "records.py": [('Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force"])',
-                                              'Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force", '
-                                              '"stiffening"])')],
-        kernels / "numba_backend.py": [("float(chain.static_force))", "float(chain.static_force), 2.0)")],
+        kernels / "kernels" / "records.py": [('"static_force", "clamp"], defaults=(True,))',
+                                              '"static_force", "clamp", "stiffening"], defaults=(True, 1.0))')],
+        kernels / "numba_backend.py": [('bool(getattr(chain.contact, "clamp", True)))',
+                                        'bool(getattr(chain.contact, "clamp", True)), 2.0)')],
         kernels / "kernels" / "forces.py": [("return c * d * math.sqrt(d)", "return p.stiffening * c * d * math.sqrt(d)"),
                                             ("F[j + 1] = c[j] * d * math.sqrt(d)",
                                              "F[j + 1] = p.stiffening * c[j] * d * math.sqrt(d)")],

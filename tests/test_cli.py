@@ -50,7 +50,8 @@ def test_pulse_json_decorated_reports_large_granules_1_to_N(capsys):
     code, out, err = run_cli(capsys, "pulse", "--small-radii", SMALL, "--json")
     assert code == 0, err
     obj = one_json_object(out)
-    assert set(obj) == {"granule", "peak_velocity", "peak_time"}
+    assert set(obj) == {"granule", "peak_velocity", "peak_time", "ok", "status"}
+    assert obj["ok"] is True and obj["status"]["name"] == "SUCCESS", obj["status"]
     assert obj["granule"] == [1, 2, 3, 4], (
         f"--small-radii observes the large granules k = 1..N; got {obj['granule']} (indices in the full decorated chain)"
     )

@@ -214,7 +214,7 @@ def test_materials_and_elastic_walls_reduce_to_one_material():
     e_ref = steel.E / (2 * (1 - steel.nu**2))
     e_pair = 1.0 / ((1 - steel.nu**2) / steel.E + (1 - ptfe.nu**2) / ptfe.E)
     assert mixed.stiffness[0] == pytest.approx(e_pair / e_ref * gc.sphere_stiffness(r[:2])[0], rel=1e-14)
-    # a rigid wall against the last (PTFE) granule: E* = E / (1 - nu^2)
+    # an infinitely stiff ("rigid") wall against the last (PTFE) granule: E* = E / (1 - nu^2)
     e_wall = ptfe.E / (1 - ptfe.nu**2)
     assert mixed.stiffness[-1] == pytest.approx(e_wall / e_ref * np.sqrt(2 * 0.9), rel=1e-14)
     with pytest.raises(ValueError, match="one material per granule"):

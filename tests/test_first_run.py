@@ -13,6 +13,7 @@ import json
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -308,3 +309,83 @@ def test_ensembles_start_the_helper_only_where_dp5_comes_second(monkeypatch):
     assert asks(paper, chain_integrators={"decorated": gc.RKN4.windowed(), "effective": gc.DP5()})
     assert not asks(paper, client=object())
     assert not asks(gc.RandomDecorated(6, contact=gc.Viscoelastic(0.05)))
+
+
+CACHE_DIR_PROBE = textwrap.dedent(
+    """
+    import json, numba
+    from granchain.backends import kernels
+    from granchain.backends.kernels import dispatch, forces
+    print(json.dumps([kernels.__file__, str(kernels.CACHE_ROOT), str(kernels.CACHE_DIR), numba.config.CACHE_DIR,
+                      dispatch.dp5_chain._cache._cache_path, forces._accelerations_paper._cache._cache_path]))
+    """
+)
+
+
+def _cache_paths(tmp_path, tree=None, **env_vars):
+    """Where a fresh interpreter caches the kernels, with ``env_vars`` (None: unset) over this environment,
+    importing granchain from ``tree`` (default: this one). Also reads Numba's cache path of two compiled
+    functions (a dispatcher's private ``_cache``: the directory it would write)."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "GRANCHAIN_CACHE", "XDG_CACHE_HOME")}
+    env.update({k: str(v) for k, v in env_vars.items() if v is not None})
+    if tree is not None:
+        env["PYTHONPATH"] = str(tree)
+    out = subprocess.run([sys.executable, "-c", CACHE_DIR_PROBE], capture_output=True, text=True, check=True, env=env,
+                         cwd=tmp_path)
+    init, root, directory, numba_dir, *functions = json.loads(out.stdout.splitlines()[-1])
+    return Path(init).parent, Path(root), Path(directory), numba_dir, [Path(f) for f in functions]
+
+
+def test_the_kernels_are_cached_in_a_user_cache_directory_keyed_on_their_sources(tmp_path):
+    """Numba's cache of the kernels is never next to their sources (an installed package may be
+    read-only, and pip does not track files written there: they once shadowed an editable reinstall):
+    it is ``granchain-kernels-<key>`` under ``$GRANCHAIN_CACHE/numba``, else ``$XDG_CACHE_HOME/granchain/numba``,
+    and under a user's own ``NUMBA_CACHE_DIR`` when set (theirs wins). Every compiled function, including
+    the closures a factory makes, gets its cache path there. The key is the digest of the kernel sources:
+    the same sources elsewhere share it, one edited source changes it (two versions never share machine
+    code: the negative control)."""
+    import shutil
+
+    for env, root in ((dict(GRANCHAIN_CACHE=tmp_path / "own"), tmp_path / "own" / "numba"),
+                      (dict(XDG_CACHE_HOME=tmp_path / "xdg"), tmp_path / "xdg" / "granchain" / "numba"),
+                      (dict(GRANCHAIN_CACHE=tmp_path / "own", NUMBA_CACHE_DIR=tmp_path / "nb"), tmp_path / "nb")):
+        package, got_root, directory, numba_dir, functions = _cache_paths(tmp_path, **env)
+        assert got_root == root and directory.parent == root, (env, got_root, directory)
+        assert directory.name.startswith("granchain-kernels-") and numba_dir == str(directory)
+        stamp = (directory / "granchain-kernels.sha256").read_text()
+        assert len(stamp) == 64 and directory.name == f"granchain-kernels-{stamp[:16]}"
+        for f in functions:
+            assert directory in f.parents and package not in f.parents, (f, package)
+    key = directory.name
+
+    tree = tmp_path / "tree"
+    shutil.copytree(Path(gc.__file__).parent, tree / "granchain", ignore=shutil.ignore_patterns("__pycache__"))
+    same = _cache_paths(tmp_path, tree, GRANCHAIN_CACHE=tmp_path / "own")
+    assert same[0] == tree / "granchain" / "backends" / "kernels" and same[2].name == key
+    with open(tree / "granchain" / "backends" / "kernels" / "forces.py", "a") as f:
+        f.write("\n# an edit\n")
+    edited = _cache_paths(tmp_path, tree, GRANCHAIN_CACHE=tmp_path / "own")
+    assert edited[2].parent == tmp_path / "own" / "numba" and edited[2].name != key
+
+
+def test_old_kernel_caches_are_pruned_to_the_most_recently_used(tmp_path):
+    """A new key's first use removes the directories of other keys but the three most recently used
+    (two installations in use side by side keep theirs); directories without granchain's stamp (a user's
+    other caches under their NUMBA_CACHE_DIR) are never touched, nor the one in use."""
+    import os
+
+    root = tmp_path / "nb"
+    old = []
+    for i in range(5):
+        d = root / f"granchain-kernels-{i:016x}"
+        d.mkdir(parents=True)
+        (d / "granchain-kernels.sha256").write_text(f"{i:064x}")
+        (d / "entry.nbi").write_text("")
+        os.utime(d / "granchain-kernels.sha256", (1e9 + i, 1e9 + i))  # i = 4 used last
+        old.append(d)
+    other = root / "someone-elses"
+    other.mkdir()
+    _, _, directory, _, _ = _cache_paths(tmp_path, NUMBA_CACHE_DIR=root)
+    assert sorted(p.name for p in root.iterdir()) == sorted([directory.name, other.name] + [d.name for d in old[2:]])

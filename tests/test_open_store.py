@@ -331,3 +331,47 @@ def test_without_the_added_variable_there_is_no_buffer():
     """Negative control of the test above: the buffers follow the schema, not a list in the runner."""
     spec = ens.EnsembleSpec(FAMILY, realizations=2, chunk_size=2)
     assert "marker" not in ens.chunk_buffers(spec, 2) and "marker" not in ens.compute_chunk(spec, 0)
+
+
+# -- stores of earlier versions are verified as far as their checksums go ------------------------------
+def test_a_040_store_is_verified_by_its_values_and_a_resume_keys_its_checksums(tmp_path):
+    """0.4.0 checksummed the values alone: a reader verifies those (a flipped value is refused), finds nothing
+    wrong with the fixture, and a resume re-keys them (checksum_scheme 2), seals the averaged pulse and the
+    attributes, and changes no value."""
+    import warnings
+
+    import zarr
+
+    from granchain.ensembles.verify import StoreDamagedError, verify_store
+
+    name = "v0.4.0-decorated-N6.zarr"
+    make, kw = FIXTURES_040[name]
+    path = tmp_path / name
+    shutil.copytree(DATA / name, path)
+    found = verify_store(path)
+    assert found.scheme == 1 and found.ok and found.complete
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        before = gc.open_store(path, load=True)
+    flipped = tmp_path / "flipped.zarr"
+    shutil.copytree(path, flipped)
+    arr = zarr.open_array(str(flipped / "peak_time"), mode="r+", zarr_format=2)
+    arr[1, 9, 2] = arr[1, 9, 2] + 1e-9
+    with pytest.raises(StoreDamagedError, match=r"chunk 1 does not match its checksum: the data file peak_time/0\.1\.0"):
+        gc.open_store(flipped, load=True)
+    with pytest.warns(store.StoreRepairWarning):  # the metadata brought up to date
+        gc.run_ensemble(make(), out=path, progress=False, threads=1, chains="both", **kw)
+    found = verify_store(path)
+    assert found.scheme == 2 and found.ok, found
+    assert_same_values(gc.open_store(path, load=True)[[v for v in before.data_vars]], before)
+
+
+def test_a_010_store_has_nothing_to_verify_and_opens_quietly():
+    import warnings
+
+    from granchain.ensembles.verify import verify_store
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gc.open_store(DATA / "v0.1.0-decorated-N6.zarr", load=True)
+    assert verify_store(DATA / "v0.1.0-decorated-N6.zarr").scheme == 0

@@ -88,4 +88,6 @@ def test_shell_quickstart_runs(empty_dir):
         proc = subprocess.run([exe, *argv[1:]], cwd=empty_dir, env=env, capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, f"{shlex.join(argv)} failed:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
     assert (empty_dir / "quick-look" / "report.html").exists()
+    assert (empty_dir / "pulse.png").stat().st_size > 10_000  # the pictures of a pulse and of the averaged one
+    assert (empty_dir / "N11-pulse.png").stat().st_size > 10_000
     assert sys.executable  # (the entry point belongs to the interpreter running the tests)

@@ -44,7 +44,9 @@ def test_export_writes_cf_netcdf_equal_to_the_store(store, tmp_path, capsys):
         assert a.attrs["Conventions"] == "CF-1.8" and "history" in a.attrs
         for key in ("numpy_version", "scipy_version", "numba_version"):
             assert a.attrs[key]
-        assert list(a["status"].attrs["flag_values"]) == [-1, 0, 1, 2, 3, 4]
+        from granchain._status import Status
+
+        assert list(a["status"].attrs["flag_values"]) == [-1] + [int(s) for s in Status]
         assert a["status"].attrs["flag_meanings"].split()[0] == "NOT_COMPUTED"
         for name in b.data_vars:
             np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
@@ -66,3 +68,32 @@ def test_export_passes_the_cf_1_8_compliance_checker(store, tmp_path):
     # the one accepted complaint: CF's time-axis heuristic wants a dimensional (calendar) time, ours is rescaled
     errors = [m for m in errors if not ("'time'" in m and "standard_name" in m)]
     assert errors == [], errors
+
+
+def test_export_refuses_a_damaged_store_unless_told_not_to_verify(store, tmp_path, capsys):
+    """One flipped bit (written through Zarr, so the file decodes): export refuses it naming the file and the
+    fix, info reports the same chunk, and --no-verify exports it anyway with a warning."""
+    import zarr
+
+    from granchain.cli.export import export
+    from granchain.ensembles.verify import StoreVerificationWarning
+
+    damaged = tmp_path / "d.zarr"
+    shutil.copytree(store, damaged)
+    arr = zarr.open_array(str(damaged / "peak_velocity"), mode="r+", zarr_format=2)
+    value = np.array(arr[1, 3, 2], dtype=np.float64)
+    arr[1, 3, 2] = (value.view(np.uint64) ^ np.uint64(1 << 62)).view(np.float64)
+    nc = tmp_path / "d.nc"
+    assert main(["export", str(damaged), str(nc)]) == 2
+    err = capsys.readouterr().err
+    assert "chunk 0 does not match its checksum: the data file peak_velocity/0.0.0" in err and "--no-verify" in err, err
+    assert not nc.exists()
+    assert main(["info", str(damaged)]) == 0
+    out = capsys.readouterr().out
+    assert "damaged      chunk 0 does not match its checksum: the data file peak_velocity/0.0.0" in out and "intact" not in out
+    assert main(["export", "--no-verify", str(damaged), str(nc)]) == 0  # the CLI prints warnings on stderr
+    assert "warning: " in (err := capsys.readouterr().err) and "without verifying" in err, err
+    with pytest.warns(StoreVerificationWarning, match="without verifying"):
+        export(damaged, tmp_path / "api.nc", verify=False)
+    with xr.open_dataset(nc) as ds:
+        assert ds["peak_velocity"].values[1, 3, 2] > 1e300  # exported as stored, damage and all

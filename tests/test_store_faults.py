@@ -1,10 +1,15 @@
 """Stores that never lie: every injected fault ends bitwise equal to an uninterrupted run, or in a
-clear error naming the file and the fix (issue 10).
+clear error naming the file and the fix.
 
 Faults: delete / truncate / garble a data chunk, a progress-sum chunk, a checksum chunk, a done flag,
 the root and progress ``.zattrs``, ``.zgroup``, a coordinate, ``.zmetadata``; kill -9 at random instants
 (also while the store is created); two writers; a stale lock. Plus: partial stores read status = -1
 everywhere, and extending 40 -> 80 realisations equals a fresh run of 80.
+
+Readers trust nothing the writer would not: a flipped bit, a chunk copied from another seed's store, a
+deleted or truncated chunk, a deleted averaged-pulse chunk and an edited seed are refused alike by
+``open_store`` (at once and lazily), ``granchain export`` and the analysis, and reported by ``granchain
+info``. The lock file lives exactly as long as its run (finished, refused or interrupted).
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import re
 import shutil
 import signal
 import socket
@@ -33,8 +39,8 @@ KW = dict(realizations=40, seed=1, chunk_size=10, progress=False, threads=1)
 VOLATILE = ("created", "history")
 
 
-def _run(path, **kw):
-    return gc.run_ensemble(6, out=path, **{**KW, **kw})
+def _run(path, family=6, **kw):
+    return gc.run_ensemble(family, out=path, **{**KW, **kw})
 
 
 def _open(path):
@@ -233,3 +239,255 @@ def test_kill_during_creation_leaves_a_resumable_state(cli_reference, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert not stale.exists()
     assert_same_store(path, cli_reference)
+
+
+# -- every reader verifies what the writer and `granchain info` verify --------------------------------
+def _flip_bit(path):
+    """One flipped bit in a stored value (the exponent's top bit of a peak velocity: 0.87 -> ~1.5e308),
+    written through Zarr so that the file still decodes: only its checksum can tell."""
+    arr = zarr.open_array(str(path / "peak_velocity"), mode="r+", zarr_format=2)
+    value = np.array(arr[0, 12, 1], dtype=np.float64)
+    arr[0, 12, 1] = (value.view(np.uint64) ^ np.uint64(1 << 62)).view(np.float64)
+
+
+def _copy_chunk_from(other):
+    """Chunk 1 of a store of another seed (every data file of it, its sums and its checksum record) copied in:
+    consistent with itself, so only checksums bound to the store can tell."""
+    def fault(path):
+        group = zarr.open_group(str(path), mode="r", zarr_format=2, use_consolidated=False)
+        names = [str(x) for x in group["progress/checked"][...]] + ["progress/checksum", "progress/done"]
+        for name in names:
+            dims = group[name].metadata.attributes["_ARRAY_DIMENSIONS"]
+            axis = "chunk" if name.startswith("progress/") else "realization"
+            key = ".".join("1" if d == axis else "0" for d in dims)
+            shutil.copy(os.path.join(other, *name.split("/"), key), os.path.join(path, *name.split("/"), key))
+    return fault
+
+
+def _edit_root_attribute(key, value):
+    def fault(path):
+        attrs = json.loads((path / ".zattrs").read_text())
+        attrs[key] = value
+        (path / ".zattrs").write_text(json.dumps(attrs))
+    return fault
+
+
+def _edit_record_seed(path):
+    attrs = json.loads((path / ".zattrs").read_text())
+    record = json.loads(attrs["granchain_parameters"])
+    record["seed"] = 5
+    attrs["granchain_parameters"] = json.dumps(record, sort_keys=True)
+    (path / ".zattrs").write_text(json.dumps(attrs))
+
+
+@pytest.fixture(scope="module")
+def other_seed(tmp_path_factory):
+    path = tmp_path_factory.mktemp("seed2") / "seed2.zarr"
+    _run(path, seed=2)
+    return path
+
+
+#: (fault, words every reader's refusal and `granchain info` say)
+READER_FAULTS = {
+    "flipped-bit": (lambda other: _flip_bit, r"chunk 1 does not match its checksum: the data file peak_velocity/0\.1\.0"),
+    "chunk-of-another-seed": (_copy_chunk_from, r"chunk 1 does not match its checksum.*copied from another store"),
+    "deleted-chunk": (lambda other: lambda p: _delete(p / "peak_velocity" / "0.1.0"),
+                      r"chunk 1 has a missing data file peak_velocity/0\.1\.0"),
+    "truncated-chunk": (lambda other: lambda p: _truncate(p / "peak_velocity" / "0.1.0"),
+                        r"chunk 1 has an unreadable data file peak_velocity/0\.1\.0 \(truncated or garbled"),
+    "deleted-mean-velocity": (lambda other: lambda p: _delete(p / "mean_velocity" / "0.0.0"),
+                              r"averaged variable mean_velocity that does not match its checksum"),
+    "edited-seed-attribute": (lambda other: _edit_root_attribute("seed", 5),
+                              r"root attributes \(\.zattrs\) that do not match the digest.*seed"),
+    "edited-seed-in-record": (lambda other: _edit_record_seed,
+                              r"parameter record .* differs from the one its chunks were written with \(seed: 5"),
+}
+
+
+@pytest.mark.parametrize("fault", sorted(READER_FAULTS))
+def test_every_reader_refuses_what_info_reports(reference, other_seed, tmp_path, fault, capsys):
+    """open_store (at once and lazily), `granchain export` and the analysis refuse the damaged store, naming
+    it, the file and the fix; `granchain info` reports the same finding; verify=False reads with a warning;
+    running the ensemble again repairs the store to the uninterrupted one."""
+    from granchain import analysis
+    from granchain.cli import main
+    from granchain.cli.info import summary
+    from granchain.ensembles.verify import StoreDamagedError, StoreVerificationWarning
+
+    make, words = READER_FAULTS[fault]
+    path = _copy(reference, tmp_path)
+    make(other_seed)(path)
+    # (the analysis says it could not read the store, with open_store's refusal)
+    for read, error in ((lambda: gc.open_store(path, load=True), StoreDamagedError),
+                        (lambda: gc.open_store(path).load(), StoreDamagedError),
+                        (lambda: analysis.mean_peak_amplitude(path), ValueError)):
+        with pytest.raises(error, match=words) as exc:
+            read()
+        assert str(path) in str(exc.value) and "run the ensemble command again" in str(exc.value)
+        assert "verify=False" in str(exc.value)
+    pytest.importorskip("netCDF4")
+    assert main(["export", str(path), str(tmp_path / "x.nc")]) == 2
+    err = capsys.readouterr().err
+    assert re.search(words, err) and "--no-verify" in err and "Traceback" not in err, err
+    assert not (tmp_path / "x.nc").exists()
+    facts = summary(str(path))
+    assert any(re.search(words, line) for line in facts["damaged"] + [f"chunk {j} {w}" for j, w in facts["damaged_chunks"].items()]), facts
+    assert main(["info", str(path)]) == 0
+    assert "intact" not in capsys.readouterr().out
+    with pytest.warns(StoreVerificationWarning, match="without verifying"):
+        if fault == "truncated-chunk":  # nothing can decode that file: still refused, naming what to do
+            with pytest.raises(ValueError, match="could not be read.*granchain info"):
+                gc.open_store(path, load=True, verify=False)
+        else:
+            ds = gc.open_store(path, load=True, verify=False)
+            assert ds.sizes["realization"] == KW["realizations"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StoreRepairWarning)
+        _run(path)
+    assert_same_store(path, reference)
+    gc.open_store(path, load=True)  # verified again
+
+
+def test_an_intact_store_is_read_without_a_word(reference, tmp_path, capsys):
+    """Negative control of the test above: the undamaged store opens, exports and reports intact, warning-free."""
+    from granchain.cli import main
+
+    path = _copy(reference, tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gc.open_store(path, load=True)
+        gc.open_store(path).load()
+        gc.open_store(path, group="progress").load()
+        gc.analysis.mean_peak_amplitude(path)
+        assert main(["info", str(path)]) == 0
+        assert "intact       every chunk, the averaged pulse and the parameter record match" in capsys.readouterr().out
+        pytest.importorskip("netCDF4")
+        assert main(["export", str(path), str(tmp_path / "x.nc")]) == 0
+
+
+def test_the_progress_group_is_verified_too(reference, tmp_path):
+    from granchain.ensembles.verify import StoreDamagedError
+
+    path = _copy(reference, tmp_path)
+    arr = zarr.open_array(str(path / "progress" / "sum_v"), mode="r+", zarr_format=2)
+    arr[2, 0, 1, 5] = arr[2, 0, 1, 5] + 1
+    gc.open_store(path, load=True)  # the results do not read the sums
+    with pytest.raises(StoreDamagedError, match=r"chunk 2 does not match its checksum: the data file progress/sum_v/2\.0\.0\.0"):
+        gc.open_store(path, group="progress", load=True)
+    with pytest.raises(ValueError, match="chunk 2 does not match its checksum"):
+        gc.analysis.ChunkSums.from_store(path)
+
+
+def test_a_lazy_read_verifies_only_the_chunks_it_reads(reference, tmp_path):
+    """Lazily, each chunk is verified when it is read: a damaged chunk is refused as soon as it is read, and
+    the others stay readable (values are hashed as read, never read twice)."""
+    from granchain.ensembles.verify import StoreDamagedError
+
+    path = _copy(reference, tmp_path)
+    _flip_bit(path)
+    ds = gc.open_store(path)
+    with xr.open_zarr(reference, consolidated=False) as ref:
+        np.testing.assert_array_equal(ds["peak_velocity"].isel(realization=slice(0, 10)).values,
+                                      ref["peak_velocity"].isel(realization=slice(0, 10)).values)
+        np.testing.assert_array_equal(ds["peak_velocity"].isel(realization=[3, 25, 39]).values,
+                                      ref["peak_velocity"].isel(realization=[3, 25, 39]).values)
+    with pytest.raises(StoreDamagedError, match="chunk 1"):
+        ds["peak_velocity"].isel(realization=15).values
+
+
+# -- the lock file lives as long as its run --------------------------------------------------------------
+def test_no_lock_file_after_a_run_finished_or_refused(reference, tmp_path):
+    assert not os.path.exists(f"{reference}.lock")
+    path = _copy(reference, tmp_path)
+    _run(path)
+    assert not os.path.exists(f"{path}.lock")
+    with pytest.raises(ValueError, match="different parameters"):
+        _run(path, seed=7)
+    assert not os.path.exists(f"{path}.lock")
+    with pytest.raises(ValueError, match="already exists"):
+        _run(path, resume=False)
+    assert not os.path.exists(f"{path}.lock")
+
+
+def test_no_lock_file_after_an_interrupted_run(reference, tmp_path, monkeypatch):
+    from granchain.ensembles import run as ens
+
+    compute = ens.compute_chunk
+
+    def interrupted_at_chunk_2(spec, j, **kw):
+        if j == 2:
+            raise KeyboardInterrupt  # as Ctrl-C in a progress callback
+        return compute(spec, j, **kw)
+
+    path = tmp_path / "interrupted.zarr"
+    monkeypatch.setattr(ens, "compute_chunk", interrupted_at_chunk_2)
+    with pytest.raises(gc.EnsembleInterrupted if hasattr(gc, "EnsembleInterrupted") else KeyboardInterrupt):
+        _run(path)
+    assert not os.path.exists(f"{path}.lock")
+    monkeypatch.setattr(ens, "compute_chunk", compute)
+    _run(path)
+    assert_same_store(path, reference)
+    assert not os.path.exists(f"{path}.lock")
+
+
+def test_the_lock_file_is_there_while_held_and_a_second_writer_is_refused(tmp_path):
+    from granchain.ensembles.lock import StoreLockedError
+
+    path = str(tmp_path / "s.zarr")
+    with StoreLock(path):
+        assert json.loads(open(f"{path}.lock").read())["pid"] == os.getpid()
+        with pytest.raises(StoreLockedError, match=rf"being written by PID {os.getpid()}"):
+            StoreLock(path).acquire()
+    assert not os.path.exists(f"{path}.lock")
+    lock = StoreLock(path)
+    lock.acquire()  # free again
+    lock.release()
+    lock.release()  # idempotent
+    assert not os.path.exists(f"{path}.lock")
+
+
+def test_a_writer_granted_a_released_file_starts_over(tmp_path, monkeypatch):
+    """The race of deleting the lock file on release: B opens the file, A releases (deletes it, unlocks), B is
+    granted the lock on the deleted file. B must notice and lock the file at the path instead, so that a
+    third writer C is refused (were B to keep the deleted file, C would create a new one and both would write)."""
+    import granchain.ensembles.lock as lockmod
+    from granchain.ensembles.lock import StoreLockedError
+
+    path = str(tmp_path / "s.zarr")
+    a, b = StoreLock(path), StoreLock(path)
+    a.acquire()
+    real_open, released = os.open, []
+
+    def open_then_release(*args, **kw):
+        fd = real_open(*args, **kw)
+        if args and str(args[0]).endswith(".lock") and not released:
+            released.append(True)
+            a.release()  # between B's open and B's flock
+        return fd
+
+    monkeypatch.setattr(lockmod.os, "open", open_then_release)
+    b.acquire()
+    monkeypatch.setattr(lockmod.os, "open", real_open)
+    assert released and os.path.exists(f"{path}.lock")
+    assert os.stat(f"{path}.lock").st_ino == os.fstat(b._fd).st_ino  # B holds the file at the path
+    with pytest.raises(StoreLockedError):
+        StoreLock(path).acquire()
+    b.release()
+    assert not os.path.exists(f"{path}.lock")
+
+
+def test_resuming_with_other_contact_settings_names_them(reference, tmp_path, capsys):
+    from granchain.cli import main
+
+    path = _copy(reference, tmp_path)
+    with pytest.raises(ValueError, match=r"written with different contact settings \(family\.contact\.gamma: stored None, "
+                                         r"asked 0\.05"):
+        _run(path, family=gc.RandomDecorated(6, contact=gc.Viscoelastic(0.05)))
+    argv = ["ensemble", "--large", "6", "--realizations", "40", "--chunk-size", "10", "--seed", "1", "--threads", "1",
+            "--quiet", "--out", str(path), "--dissipation", "0.05"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "written with different contact settings" in err and "family.contact.gamma" in err, err
+    assert "integrates x'' = f(x)" not in err
+    assert not os.path.exists(f"{path}.lock")
+    assert_same_store(path, reference)  # untouched

@@ -1,6 +1,8 @@
 """Stores survive upgrades: a store written by granchain 0.4.0 (fixtures in tests/data, written by
-that version: make_v0.4.0_fixtures.py) is resumed and extended by this version bitwise, because a
-resumed store is compared on its results version, not on the package version.
+that version: make_v0.4.0_fixtures.py) is resumed and extended by this version, because a resumed
+store is compared on its results version, not on the package version: what it holds is kept bitwise,
+what this version adds is bitwise a fresh run's on this machine, and a fresh run agrees with the
+fixture, written on another machine, within the accuracy contract (:data:`CONTRACT`).
 """
 
 from __future__ import annotations
@@ -38,6 +40,36 @@ def assert_same_results(a: xr.Dataset, b: xr.Dataset) -> None:
         np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
 
 
+#: What the same computation on another processor may differ by. Numba compiles the kernels for the
+#: processor it runs on (vector widths, the maths library's last bit), so a fixture written on one machine
+#: and a fresh run on another agree within the accuracy contract, not bitwise; the step controller's and
+#: the stop rule's decisions taken at round-off distance from a threshold may then differ, so the run's
+#: own bookkeeping (steps, end time, energy error of a run that went on longer) is not compared across
+#: machines. Measured for the tapered-wall fixture on an AMD EPYC against the machine that wrote it:
+#: peaks 3.6e-8 relative, times 5e-10, averaged pulse 1.2e-7, 4 of 24 end times moved by the stop rule.
+CONTRACT = {"peak_velocity": dict(rtol=1e-6, atol=0), "peak_time": dict(rtol=0, atol=1e-6),
+            "peak_force": dict(rtol=1e-6, atol=0), "peak_force_time": dict(rtol=0, atol=1e-6),
+            "peak_wall_force": dict(rtol=1e-6, atol=0), "peak_wall_force_time": dict(rtol=0, atol=1e-6),
+            "mean_velocity": dict(rtol=0, atol=1e-6), "mean_velocity_stderr": dict(rtol=0, atol=1e-6),
+            "aligned_velocity": dict(rtol=0, atol=1e-6), "aligned_velocity_stderr": dict(rtol=0, atol=1e-6),
+            "status": dict(rtol=0, atol=0), "small_radius": dict(rtol=0, atol=0), "n_valid": dict(rtol=0, atol=0)}
+
+
+def assert_same_within_contract(a: xr.Dataset, b: xr.Dataset) -> None:
+    """``a`` and ``b`` computed by the same code on two machines (see :data:`CONTRACT`)."""
+    for name, tol in CONTRACT.items():
+        if name in a or name in b:
+            np.testing.assert_allclose(a[name].values, b[name].values, err_msg=name, equal_nan=True, **tol)
+
+
+def assert_new_realisations_as_fresh(extended: xr.Dataset, fresh: xr.Dataset, first: int) -> None:
+    """The realisations from ``first`` on, computed by this version on this machine: bitwise a fresh run's."""
+    per_realisation = [n for n in RESULTS if n in extended and "realization" in extended[n].dims]
+    for name in per_realisation:
+        np.testing.assert_array_equal(extended[name].isel(realization=slice(first, None)).values,
+                                      fresh[name].isel(realization=slice(first, None)).values, err_msg=name)
+
+
 def _copy(name, tmp_path) -> Path:
     path = tmp_path / name
     shutil.copytree(DATA / name, path)
@@ -67,8 +99,8 @@ def test_a_040_store_resumes_with_its_metadata_brought_up_to_date(name, tmp_path
         resumed = _run(make(), path, **kw)
     assert len([w for w in caught if issubclass(w.category, StoreRepairWarning)]) == 1
     with xr.open_zarr(DATA / name, consolidated=False) as fixture:
-        assert_same_results(resumed, fixture.load())
-    assert_same_results(resumed, _run(make(), **kw))
+        assert_same_results(resumed, fixture.load())  # nothing recomputed
+    assert_same_within_contract(resumed, _run(make(), **kw))  # the fixture was written on another machine
     with xr.open_zarr(path, consolidated=False) as ds:
         assert json.loads(ds.attrs["granchain_parameters"])["results_version"] == RESULTS_VERSION
         assert ds["peak_time"].attrs["units"] == "1" and ds["peak_time"].attrs["rescaled_quantity"] == "time"
@@ -84,7 +116,14 @@ def test_a_040_store_is_extended_bitwise(name, tmp_path):
     more = {**kw, "realizations": kw["realizations"] + 2 * kw["chunk_size"]}
     with pytest.warns(StoreRepairWarning):
         extended = _run(make(), path, **more)
-    assert_same_results(extended, _run(make(), **more))
+    with xr.open_zarr(DATA / name, consolidated=False) as fixture:
+        old = fixture.load()
+    n_old = old.sizes["realization"]
+    per_realisation = [n for n in RESULTS if n in old and "realization" in old[n].dims]
+    assert_same_results(extended[per_realisation].isel(realization=slice(0, n_old)), old[per_realisation])
+    fresh = _run(make(), **more)
+    assert_new_realisations_as_fresh(extended, fresh, n_old)
+    assert_same_within_contract(extended, fresh)
 
 
 def test_a_040_store_resumes_without_naming_its_pulse_window_or_integrators(tmp_path):

@@ -1,4 +1,4 @@
-"""A rigid wall at the far end (issue 12, item 2): a last granule of infinite mass.
+"""A fixed wall at the far end (issue 12, item 2): a last granule of infinite mass.
 
 1. the representation: only the last granule may be infinitely heavy, it is never observed, its
    contact stiffness is sqrt(2 R) (the limit of Eq. r-prime), builders and effective chains;
@@ -209,7 +209,7 @@ def test_cli_ensemble_wall_and_units(tmp_path, capsys):
 
 @pytest.mark.parametrize("make", [gc.RKN4.relaxed, gc.DP5.windowed])
 def test_a_wall_that_switches_goal_control_off_says_so(make):
-    """A rigid wall sends the pulse back through the granules behind the front, so the relaxed zone and
+    """A fixed wall sends the pulse back through the granules behind the front, so the relaxed zone and
     the trailing window are switched off there (the results are the exact method's, bitwise). The
     result must then say so: its integrator record has no goal-oriented zones and names why, in the
     Dataset and the table; the free chain's record (negative control) keeps its zones and says nothing."""
@@ -221,10 +221,10 @@ def test_a_wall_that_switches_goal_control_off_says_so(make):
     exact = gc.simulate(chain.with_wall(), type(integ)(integ.rtol, integ.atol))
     np.testing.assert_array_equal(walled.peak_velocity, exact.peak_velocity)
     record = walled.integrator_record
-    assert record["name"] == integ.name and "rigid wall" in record["goal_control"]
+    assert record["name"] == integ.name and "fixed wall" in record["goal_control"]
     assert record.get("relaxed_lag") is None and record.get("window_lag") is None
     assert json.loads(walled.to_dataset().attrs["integrator_record"]) == record
-    assert "goal-oriented error control off: the chain ends in a rigid wall" in walled.table()
+    assert "goal-oriented error control off: the chain ends in a fixed wall" in walled.table()
     free = gc.simulate(chain, integ)
     assert "goal_control" not in free.integrator_record and free.integrator_record == integ.describe()
     assert "goal-oriented" not in free.table()
@@ -242,7 +242,21 @@ def test_a_walled_store_records_the_integrators_as_they_ran(tmp_path):
     assert set(ran) == {"decorated", "effective"}
     assert asked.get("relaxed_lag") is not None  # the ensemble default asks for a relaxed zone ...
     for record in ran.values():  # ... which the wall switched off
-        assert record.get("relaxed_lag") is None and "rigid wall" in record["goal_control"]
+        assert record.get("relaxed_lag") is None and "fixed wall" in record["goal_control"]
     free = gc.run_ensemble(gc.RandomDecorated(4, gc.Uniform(0.01, 0.4)), realizations=2, chunk_size=2, seed=1,
                            progress=False, out=tmp_path / "f.zarr")
     assert all("goal_control" not in r for r in json.loads(free.attrs["granchain_integrator_as_run"]).values())
+
+
+def test_the_old_name_of_the_fixed_wall_still_works_and_warns():
+    """"Rigid" means only an infinitely stiff wall material; the boundary, an immovable wall of any
+    material, is FixedWall, and its old name RigidWall warns."""
+    import granchain.model as model
+    from granchain.model import contacts
+
+    with pytest.warns(DeprecationWarning, match="FixedWall"):
+        assert contacts.RigidWall is contacts.FixedWall
+    with pytest.warns(DeprecationWarning, match="FixedWall"):
+        assert model.RigidWall is contacts.FixedWall
+    assert isinstance(gc.monodisperse(4, wall=True).boundary, contacts.FixedWall)
+    assert "fixed wall" in contacts.FixedWall.why_no_goal_control and "rigid" not in contacts.FixedWall.why_no_goal_control

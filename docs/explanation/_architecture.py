@@ -56,7 +56,7 @@ BOXES = {
               "physical units (paper Sec. II\nrescaling): the units attributes\nof every result"),
     "model": (0.4, 0.2, 15.2, 1.3, CORE, False, "granchain.model",
               "what a chain is, as values: contacts (PowerLaw, Viscoelastic, Precompression, FreeEnd, LoadedEnd, "
-              "RigidWall, Impulse, Striker),\ncollision (restitution), chain (Chain and its builders), effective, "
+              "FixedWall, Impulse, Striker),\ncollision (restitution), chain (Chain and its builders), effective, "
               "distributions, random (chains drawn from (seed, i))"),
 }
 

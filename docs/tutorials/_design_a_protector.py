@@ -2,11 +2,11 @@
 
     python docs/tutorials/_design_a_protector.py
 
-A steel bead of radius 5 mm strikes, at 1 m/s, a column of 20 steel beads standing on a rigid wall
+A steel bead of radius 5 mm strikes, at 1 m/s, a column of 20 steel beads standing on a fixed steel wall (immovable, of the beads' material)
 (the bead struck first is granule 1). Which geometric taper R_k = (1 - q)^(k-1), q in [0, 0.2],
 transmits the smallest peak force to the wall? ``compute()`` runs the design (SciPy's differential
 evolution and a Powell refinement over batches of the compiled kernel) and returns the result;
-``plot(result)`` draws its convergence and the best design's wall force against a monodisperse
+``plot(result)`` draws its convergence and the wall force of the design found against a monodisperse
 chain of the same number of beads and one of the same length and mass, in newtons and microseconds. The script checks its
 picture before saving it: every axis labelled with its unit, a legend on every panel.
 """

@@ -517,9 +517,12 @@ def _dataset(ds):
 
     if isinstance(ds, (str, os.PathLike)):
         from ..ensembles.read import open_store
+        from ..ensembles.verify import StoreDamagedError
 
         try:
             return open_store(ds)
+        except StoreDamagedError:  # a store, damaged: its own message names the chunk and the remedy
+            raise
         except ValueError as exc:
             raise ValueError(f"ds = {os.fspath(ds)!r} is neither an ensemble Dataset nor a store it can read: {exc}") from None
     return ds
@@ -728,6 +731,8 @@ from .jackknife import (  # noqa: E402
     chunk_jackknife,
     jackknife_stderr,
 )
+from .spacetime import AveragedPulse, averaged_pulse, plot_averaged_pulse, __all__ as _SPACETIME  # noqa: E402
+__all__ += _SPACETIME  # the averaged pulse as a space-time diagram (granchain.analysis.spacetime)
 
 _PULSEFITS = ("CurveAgreement", "PulseFit", "averaged_peak_gap", "fit_averaged_arrival", "fit_averaged_decay",
               "paper_curve_agreement", "pulse_jackknife", "pulse_means", "rounding_envelope")

@@ -12,7 +12,7 @@ Every integrator names its backend (``Integrator.backend``); :func:`get_backend`
 run the backend checks that the integrator's capabilities fit the chain's declared assumptions
 (:meth:`Backend.check`): a method that needs conservative forces x'' = f(x) refuses a contact law
 that depends on velocities, and goal-oriented error control (relaxed zone, trailing window) is
-turned off for a chain whose pulse comes back (a rigid wall) and the effective integrator says so
+turned off for a chain whose pulse comes back (a fixed wall) and the effective integrator says so
 (:func:`effective_integrator`). The test-suite runs every backend over the same cases
 (``tests/test_backends.py``).
 """
@@ -31,7 +31,7 @@ __all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator", "integr
 def effective_integrator(integrator, chain):
     """The integrator as it actually runs on ``chain`` (a :class:`granchain.Chain`, or its boundary
     value): its goal-oriented zones (relaxed zone, trailing window) switched off when the boundary
-    does not license them (a rigid wall sends the pulse back through the granules behind the front),
+    does not license them (a fixed wall sends the pulse back through the granules behind the front),
     else ``integrator`` itself."""
     boundary = getattr(chain, "boundary", chain)
     if integrator.goal_oriented and not boundary.licenses_goal_control:

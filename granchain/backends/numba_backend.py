@@ -71,7 +71,7 @@ def model_params(chain) -> Params:
     """The kernels' ``Params`` of ``chain``: the scalars its model declares (contact law, boundary,
     static load). The one place a new physics parameter is filled in."""
     return Params(float(chain.n), power_code(chain.n), chain.boundary.wall, float(chain.contact.gamma),
-                  float(chain.static_force))
+                  float(chain.static_force), bool(getattr(chain.contact, "clamp", True)))
 
 
 def model_record(chain) -> Model:

@@ -39,6 +39,7 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
     from the forces less their static values (the external load balances them at the ends)."""
     M = masses.size
     gamma = getattr(law, "gamma", 0.0)
+    clamp = getattr(law, "clamp", True)  # the viscoelastic force clamped at 0 (default) or pulling (published law)
     with np.errstate(divide="ignore"):
         d0 = (static_force / stiffness) ** (1.0 / (n - 1.0)) if static_force > 0 else np.zeros(M - 1)
     f0 = np.where(d0 > 0.0, stiffness * d0 ** (n - 1.0), 0.0)
@@ -48,7 +49,8 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
         if gamma > 0.0:
             w = v[:-1] - v[1:]
             dp = np.where(d > 0.0, d, 0.0)
-            return np.where(d > 0.0, np.maximum(stiffness * dp ** (n - 2.0) * (dp + gamma * w), 0.0), 0.0)
+            f = stiffness * dp ** (n - 2.0) * (dp + gamma * w)
+            return np.where(d > 0.0, np.maximum(f, 0.0) if clamp else f, 0.0)
         return np.where(d > 0.0, stiffness * np.abs(d) ** (n - 1.0), 0.0)
 
     def rhs(t, y):

@@ -58,6 +58,8 @@ def compile_elsewhere(job: str = "dp5") -> subprocess.Popen | None:
     module's docstring); None where none is started. Stop it with :func:`stop`."""
     from numba.core import config
 
+    from .kernels import CACHE_ROOT
+
     if config.DISABLE_JIT or (os.cpu_count() or 1) < 2 or is_cached(_entry_point(job)):
         return None
     # The helper imports this very granchain: the directory this one is imported from goes first on its
@@ -66,9 +68,11 @@ def compile_elsewhere(job: str = "dp5") -> subprocess.Popen | None:
     root = str(Path(__file__).resolve().parents[2])
     code = f"import sys\nif {root!r} not in sys.path:\n    sys.path.insert(0, {root!r})\n{JOBS[job][1]}\n"
     safe_path = sys.version_info >= (3, 11)
+    # The helper's kernels go where this process's are (it derives the same directory from that root).
+    env = dict(os.environ, NUMBA_NUM_THREADS="1", NUMBA_CACHE_DIR=str(CACHE_ROOT))
     try:
         proc = subprocess.Popen([sys.executable, *(["-P"] if safe_path else []), "-c", code],
-                                cwd=None if safe_path else root, env=dict(os.environ, NUMBA_NUM_THREADS="1"),
+                                cwd=None if safe_path else root, env=env,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     except OSError:  # no process can be started here: this process compiles it when it needs it
         return None

@@ -13,7 +13,7 @@ import re
 import sys
 import warnings
 
-SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "validity", "info", "export", "theory", "design")
+SUBCOMMANDS = ("pulse", "bca", "ensemble", "reproduce", "validity", "info", "export", "plot", "theory", "design")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -27,11 +27,12 @@ def add_contact_arguments(parser, *, sensor: bool = False) -> None:
     load.add_argument("--static-force", dest="precompression", metavar="FORCE", help="the same as --precompression")
     damp = g.add_mutually_exclusive_group()
     damp.add_argument("--dissipation", metavar="GAMMA", help=(
-        "viscoelastic (Kuwabara-Kono) contacts F = c [d^(n-1) + GAMMA d^(n-2) dd/dt]: GAMMA, the damping time "
-        "(rescaled; or a time such as 2us)"))
+        "viscoelastic (Kuwabara-Kono) contacts F = c [d^(n-1) + GAMMA d^(n-2) dd/dt], clamped at 0 (a contact never "
+        "pulls; the published restitution tables are for the unclamped law, whose e is lower: granchain.Viscoelastic"
+        "(clamp=False) in Python): GAMMA, the damping time (rescaled; or a time such as 2us)"))
     damp.add_argument("--restitution", metavar="E@V", help=(
-        "viscoelastic contacts calibrated to a coefficient of restitution E in (0, 1] of two reference granules "
-        "colliding at speed V (rescaled; or a speed such as 1m/s), e.g. 0.9@1 or 0.9@1m/s"))
+        "viscoelastic contacts (clamped, as --dissipation) calibrated to a coefficient of restitution E in [0.05, 1] of "
+        "two reference granules colliding at speed V (rescaled; or a speed such as 1m/s), e.g. 0.9@1 or 0.9@1m/s"))
     strike = g.add_mutually_exclusive_group()
     strike.add_argument("--striker-mass", metavar="M", help=(
         "strike the chain with a free sphere of this mass (rescaled: the reference granule's mass is 1; or a mass "
@@ -45,81 +46,130 @@ def add_contact_arguments(parser, *, sensor: bool = False) -> None:
             "as an embedded gauge measures it) and print its peak and time"))
 
 
-def _has_unit(text: str) -> bool:
+import math
+import re
+
+#: A number followed by a unit ("2N", "5 g", "1.5e-3 m/s", "3/16 in"): what "has a unit" means.
+_NUMBER_THEN_UNIT = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(\s*/\s*\d+)?\s*[A-Za-z\u00b5\u03bc].*$")
+
+
+def _number(text: str) -> float | None:
+    """``text`` as a bare number, or None when it is not one."""
     try:
-        float(text)
-        return False
+        return float(text)
     except ValueError:
-        return True
+        return None
 
 
-def _quantity(text: str, kind: str, option: str, units, unit_of):
+def _quantity(text: str, kind: str, option: str, units, unit_of, syntax: str):
     """``text`` in rescaled units: a bare number as it is, a quantity through ``units`` (``unit_of(units)``
-    is the SI size of the rescaled unit)."""
+    is the SI size of the rescaled unit). ``syntax`` is what the option takes, for the messages."""
     from ..units import si_value
 
     if text is None:
         return None
-    if not _has_unit(text):
-        return float(text)
-    if units is None:
-        raise ValueError(f"{option} {text!r} has a unit: give the physical-unit options too (--material, --radius, "
-                         f"--impact-speed), which fix the rescaled units, or a bare number in rescaled units")
-    return si_value(text, kind, option) / unit_of(units)
+    if not text.strip():
+        raise ValueError(f"{option} is empty: give {syntax}")
+    x = _number(text)
+    if x is None:
+        if not _NUMBER_THEN_UNIT.match(text):
+            raise ValueError(f"{option} {text!r} is neither a number nor a quantity: give {syntax}")
+        if units is None:
+            raise ValueError(f"{option} {text!r} has a unit: give the physical-unit options too (--material, --radius, "
+                             f"--impact-speed), which fix the rescaled units, or a bare number in rescaled units")
+        x = si_value(text, kind, option) / unit_of(units)
+    if not math.isfinite(x):
+        raise ValueError(f"{option} must be finite, got {text!r}: give {syntax}")
+    return x
 
 
 def _restitution(text: str, units) -> tuple[float, float]:
     if text is None:
         return None
-    e, sep, v = text.partition("@")
-    if not sep or not e.strip() or not v.strip():
-        raise ValueError(f"--restitution needs E@V (a coefficient of restitution and the impact speed it was measured at), "
-                         f"e.g. 0.9@1 or 0.9@1m/s; got {text!r}")
-    try:
-        e = float(e)
-    except ValueError:
-        raise ValueError(f"--restitution: {e!r} is not a number (E@V, e.g. 0.9@1m/s)") from None
-    speed = _quantity(v.strip(), "speed", "--restitution speed", units, lambda s: s.velocity)
+    syntax = ("E@V: a coefficient of restitution E in (0, 1] and the impact speed V it was measured at, "
+              "e.g. 0.9@1 (rescaled) or 0.9@1m/s")
+    if text.count("@") != 1:
+        raise ValueError(f"--restitution takes {syntax}; got {text!r}")
+    e_text, _, v = text.partition("@")
+    if not e_text.strip() or not v.strip():
+        raise ValueError(f"--restitution takes {syntax}; got {text!r}")
+    e = _number(e_text)
+    if e is None or not math.isfinite(e):
+        raise ValueError(f"--restitution: E = {e_text!r} is not a finite number ({syntax})")
+    if not 0.0 < e <= 1.0:
+        raise ValueError(f"--restitution: E = {e_text!r} must lie in (0, 1] (1: elastic; {syntax})")
+    speed = _quantity(v.strip(), "speed", "--restitution's speed V", units, lambda s: s.velocity,
+                      "a speed (rescaled, e.g. 1, or with a unit such as 1m/s)")
     if not (speed > 0):
-        raise ValueError(f"--restitution: the impact speed must be > 0, got {v!r}")
+        raise ValueError(f"--restitution: the impact speed V must be > 0, got {v!r}")
     return e, speed
+
+
+def _checked(option: str, text: str, make):
+    """``make()``, its ValueError told with the user's own ``text`` (the value they typed, not its rescaled
+    number)."""
+    try:
+        return make()
+    except ValueError as exc:
+        raise ValueError(f"{option} {text!r}: {exc}") from None
 
 
 def contacts_from_args(args, units, n: float) -> dict:
     """The real contacts the options ask for: {"contact": law or None, "static_force": F0,
     "striker_mass": M or None, "wall_material": name or None} in rescaled units (errors say what to
-    change)."""
+    change, quoting what was typed)."""
     from ..model.contacts import Precompression, Viscoelastic
 
-    force = _quantity(getattr(args, "precompression", None), "force", "--precompression", units, lambda s: s.force)
-    load = Precompression(0.0 if force is None else force)
+    text = getattr(args, "precompression", None)
+    force = _quantity(text, "force", "--precompression", units, lambda s: s.force,
+                      "a static force >= 0 (rescaled, e.g. 0.1, or with a unit such as 2N)")
+    if force is not None and force < 0:
+        raise ValueError(f"--precompression must be finite and >= 0 (a compressive force; 0: none), got {text!r}")
+    load = Precompression(0.0) if force is None else _checked("--precompression", text, lambda: Precompression(force))
     if load.force > 0 and n <= 1.0:
         raise ValueError(f"--precompression needs an exponent n > 1 (--n), got {n:g}")
     law = None
-    gamma = _quantity(getattr(args, "dissipation", None), "time", "--dissipation", units, lambda s: s.time)
+    text = getattr(args, "dissipation", None)
+    gamma = _quantity(text, "time", "--dissipation", units, lambda s: s.time,
+                      "a damping time >= 0 (rescaled, e.g. 0.05, or with a unit such as 2us)")
     if gamma is not None:
-        law = Viscoelastic(gamma, n)
+        if gamma < 0:
+            raise ValueError(f"--dissipation must be finite and >= 0 (a damping time; 0: elastic), got {text!r}")
+        law = _checked("--dissipation", text, lambda: Viscoelastic(gamma, n))
     rest = _restitution(getattr(args, "restitution", None), units)
     if rest is not None:
-        law = Viscoelastic.from_restitution(rest[0], rest[1], n=n)
-    mass = _quantity(getattr(args, "striker_mass", None), "mass", "--striker-mass", units, lambda s: s.mass)
-    radius = _quantity(getattr(args, "striker_radius", None), "length", "--striker-radius", units, lambda s: s.radius)
+        law = _checked("--restitution", args.restitution, lambda: Viscoelastic.from_restitution(rest[0], rest[1], n=n))
+    text = getattr(args, "striker_mass", None)
+    mass = _quantity(text, "mass", "--striker-mass", units, lambda s: s.mass,
+                     "a mass > 0 (rescaled: the reference granule's mass is 1; or with a unit such as 5g)")
+    if mass is not None and not mass > 0:
+        raise ValueError(f"--striker-mass must be > 0 (a striker of no mass strikes nothing), got {text!r}")
+    rtext = getattr(args, "striker_radius", None)
+    radius = _quantity(rtext, "length", "--striker-radius", units, lambda s: s.radius,
+                       "a radius > 0 (rescaled: the reference granule's radius is 1; or with a unit such as 3mm)")
     if radius is not None:
         if not radius > 0:
-            raise ValueError(f"--striker-radius must be > 0, got {args.striker_radius!r}")
+            raise ValueError(f"--striker-radius must be > 0, got {rtext!r}")
+        from ..model.chain import _check_radii
+
+        _checked("--striker-radius", rtext, lambda: _check_radii(__import__("numpy").array([radius]), "striker radius"))
         mass = radius**3  # a sphere of the chain's material (rescaled mass R^3)
-    if mass is not None and not mass > 0:
-        raise ValueError(f"--striker-mass must be > 0 (a striker of no mass strikes nothing), got {args.striker_mass!r}")
     wall_material = getattr(args, "wall_material", None)
     if wall_material is not None and not getattr(args, "wall", False):
         raise ValueError("--wall-material needs --wall")
     return {"contact": law, "static_force": load.force, "striker_mass": mass, "wall_material": wall_material}
 
 
-def apply_to_chain(chain, contacts: dict):
-    """``chain`` with the real contacts of :func:`contacts_from_args` (striker, law, static load)."""
+def apply_to_chain(chain, contacts: dict, args=None):
+    """``chain`` with the real contacts of :func:`contacts_from_args` (striker, law, static load); a
+    refusal quotes the option's text in ``args`` (what the user typed), not its rescaled value."""
+    said = {k: getattr(args, k, None) for k in ("precompression", "striker_mass", "striker_radius")}
     if contacts["striker_mass"] is not None:
-        chain = chain.with_striker(mass=contacts["striker_mass"])
+        option = "--striker-radius" if said.get("striker_radius") is not None else "--striker-mass"
+        chain = _checked(option, said.get(option[2:].replace("-", "_")),
+                         lambda: chain.with_striker(mass=contacts["striker_mass"]))
     if contacts["contact"] is not None or contacts["static_force"] > 0:
-        chain = chain.replace(contact=contacts["contact"] or chain.contact, static_force=contacts["static_force"])
+        change = dict(contact=contacts["contact"] or chain.contact, static_force=contacts["static_force"])
+        chain = (_checked("--precompression", said["precompression"], lambda: chain.replace(**change))
+                 if said.get("precompression") is not None else chain.replace(**change))
     return chain

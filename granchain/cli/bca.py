@@ -32,6 +32,8 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
+    import math
+
     from .. import Uniform, bca
     from .._validate import count
 
@@ -41,6 +43,14 @@ def run(args) -> int:
         raise ValueError(f"--granule must be in 1..{N} (1-based large granule), got {k}")
     if args.realizations < 0:
         raise ValueError(f"--realizations must be >= 0, got {args.realizations}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if not (math.isfinite(args.alpha) and math.isfinite(args.beta) and 0.0 < args.alpha < args.beta <= 1.0):
+        raise ValueError(f"--alpha and --beta need 0 < alpha < beta <= 1 (small radii uniform on [alpha, beta], in units "
+                         f"of the large radius), got --alpha {args.alpha:g} --beta {args.beta:g}")
+    if not (math.isfinite(args.n) and args.n > 2.0):
+        raise ValueError(f"--n must be a finite exponent with n > 2 (the binary collision approximation needs a solitary pulse; "
+                         f"Hertz: 2.5), got {args.n:g}")
     dist = Uniform(args.alpha, args.beta)
     g = bca.gaussian_limit(dist, k, args.n)
     out = {

@@ -33,15 +33,17 @@ def add_parser(subparsers) -> None:
         description=(
             "Search a design space for the chain that minimises the force on a wall (or maximises the duration of its impulse, "
             "or minimises the energy it transmits): SciPy's differential evolution, each generation one batch of the compiled "
-            "ensemble kernel, then a local refinement. Rescaled units of the paper's Sec. II (granule 1 has radius 1 and is "
+            "ensemble kernel, then a local refinement and, for one or two parameters, a final local polish; the summary says how "
+            "sure the result is (the search's convergence, its last improvements, the polish's change). Rescaled units of the paper's Sec. II (granule 1 has radius 1 and is "
             "struck with velocity 1); with --material, --radius and --impact-speed the summary is in newtons and seconds too. "
             "Writes OUT/result.json (for programs), OUT/summary.md, OUT/design.png and the resumable history OUT/history.zarr: "
             "run the same command again to continue an interrupted run."),
     )
     p.add_argument("--space", choices=SPACES, default="tapered", help="the design space (default: tapered)")
     p.add_argument("--objective", choices=sorted(OBJECTIVE_ENDS), default="wall-force",
-                   help="what to optimise (default: wall-force, the peak force on a rigid wall); transmitted-energy is judged "
-                        "at a free end, the others against a rigid wall")
+                   help="what to optimise (default: wall-force, the peak force on a fixed wall of the granules' material, "
+                        "contact stiffness sqrt(2 R_M)); transmitted-energy is judged at a free end, the others against that "
+                        "fixed wall")
     p.add_argument("--size", type=int, default=20,
                    help="granules of a tapered or binary chain; large granules of a (random) decorated chain (default: 20)")
     p.add_argument("--budget", type=int, default=None,
@@ -73,6 +75,9 @@ def add_parser(subparsers) -> None:
                    help="every radius at most this (granule 1, the struck one, has radius 1)")
     c.add_argument("--free-end", dest="free_end", action="store_true",
                    help="judge transmitted-momentum or arrival-time at a free far end instead of a wall")
+    p.add_argument("--no-polish", dest="polish", action="store_false",
+                   help="no final local polish of a one- or two-parameter design (it costs up to 60 or 110 evaluations "
+                        "beyond the budget, and can only improve the result)")
     p.add_argument("--no-figure", dest="figure", action="store_false", help="do not draw OUT/design.png")
     p.add_argument("--quiet", action="store_true", help="no progress report")
     add_unit_arguments(p)
@@ -117,15 +122,17 @@ def _statistic(text: str):
 
 def run(args) -> int:
     from ..design import minimum_budget, optimize
+    from ..design.preflight import output_directory
     from ._units import scale_from_args
 
+    out = output_directory(args.out, "--out")  # checked before any work: a run's result must have somewhere to go
     units = scale_from_args(args, n=2.5)  # checked before any integration
     space = build_space(args)
     local = None if args.local == "none" else args.local
     budget = args.budget if args.budget is not None else max(DEFAULT_BUDGET, minimum_budget(space, args.popsize, local))
     try:
         result = optimize(space, args.objective, budget=budget, seed=args.seed, popsize=args.popsize, local=local,
-                          statistic=_statistic(args.statistic), out=args.out, progress=not args.quiet)
+                          statistic=_statistic(args.statistic), out=out, progress=not args.quiet, polish=args.polish)
     except KeyboardInterrupt:
         print(f"granchain design: interrupted; the evaluations so far are saved in {args.out}. Run the same command again to "
               "continue.", file=sys.stderr)
@@ -141,17 +148,17 @@ def run(args) -> int:
                                        "reference_value": float(units.to_si(result.reference_value, kind))})
             if space.random:
                 record["physical"]["best_stderr"] = float(units.to_si(result.stderr, kind))
-    with open(os.path.join(args.out, "result.json"), "w") as fh:
+    with open(os.path.join(out, "result.json"), "w") as fh:
         json.dump(record, fh, indent=2)
     summary = result.summary(units)
     if args.figure:
         fig = result.plot(scale=units)
-        fig.savefig(os.path.join(args.out, "design.png"), dpi=110)
+        fig.savefig(os.path.join(out, "design.png"), dpi=110)
         import matplotlib.pyplot as plt
 
         plt.close(fig)
         summary += f"\n![convergence and wall force]({'design.png'})\n"
-    with open(os.path.join(args.out, "summary.md"), "w") as fh:
+    with open(os.path.join(out, "summary.md"), "w") as fh:
         fh.write(summary)
     print(summary, end="")
     return 0

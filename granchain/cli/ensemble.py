@@ -50,7 +50,7 @@ def add_parser(subparsers) -> None:
     fam.add_argument("--momentum-conserving", action="store_true",
                      help="decorated families: the effective chain starts with m_1/mu_1 instead of velocity 1")
     fam.add_argument("--wall", action="store_true",
-                     help="end every chain in a rigid wall (a granule of infinite radius and mass): stores the wall's "
+                     help="end every chain in a fixed wall (a granule of infinite radius and mass): stores the wall's "
                           "peak force and its time per realisation (peak_wall_force, peak_wall_force_time)")
     p.add_argument("--chain", default="both", help="which chains: decorated, effective or both (decorated families; default both)")
     p.add_argument("--realizations", type=int, default=1000, help="number of random chains (default 1000)")

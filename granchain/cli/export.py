@@ -23,6 +23,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("store", help="the Zarr store, e.g. runs/N26.zarr")
     p.add_argument("file", help="the netCDF file to write, e.g. N26.nc")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    p.add_argument("--no-verify", dest="verify", action="store_false",
+                   help="export without checking the store against its checksums (a damaged store is refused "
+                        "otherwise; `granchain info STORE` lists what is damaged), with a warning")
     p.set_defaults(func=run)
 
 
@@ -76,8 +79,9 @@ def cf_dataset(ds):
     return out
 
 
-def export(store, file, force: bool = False) -> str:
-    """Write ``store`` as a CF-1.8 netCDF file (returns the path)."""
+def export(store, file, force: bool = False, verify: bool = True) -> str:
+    """Write ``store`` as a CF-1.8 netCDF file (returns the path). The store is verified as every reader
+    verifies it (:func:`granchain.open_store`); ``verify=False`` exports it unchecked, with a warning."""
     import warnings
 
     from ..ensembles.read import open_store
@@ -98,10 +102,14 @@ def export(store, file, force: bool = False) -> str:
     parent = os.path.dirname(os.path.abspath(file))
     if not os.path.isdir(parent) or not os.access(parent, os.W_OK):
         raise ValueError(f"cannot write {file}: its folder {parent} is missing or not writable")
-    ds = open_store(store, load=True)  # says what to do for a path that is no store or a damaged one
+    ds = open_store(store, load=True, verify=verify)  # says what to do for a path that is no store or a damaged one
     done = None
     try:
-        done = open_store(store, group="progress", load=True)["done"].values
+        from ..ensembles.verify import StoreVerificationWarning
+
+        with warnings.catch_warnings():  # warned about once, above; only the done flags are read (lazily)
+            warnings.simplefilter("ignore", StoreVerificationWarning)
+            done = open_store(store, group="progress", verify=verify)["done"].values
     except (ValueError, KeyError):
         pass
     if done is not None and not done.all():
@@ -112,6 +120,6 @@ def export(store, file, force: bool = False) -> str:
 
 
 def run(args) -> int:
-    path = export(args.store, args.file, force=args.force)
+    path = export(args.store, args.file, force=args.force, verify=args.verify)
     print(f"wrote {path}")
     return 0

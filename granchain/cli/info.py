@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 
 
 def add_parser(subparsers) -> None:
@@ -44,12 +45,15 @@ def summary(path: str) -> dict:
 
     from ..ensembles.lock import StoreLock
     from ..ensembles.read import open_store
-    from ..ensembles.store import current_record, stored_parameters, verify_chunks
+    from ..ensembles.store import current_record, stored_parameters
+    from ..ensembles.verify import StoreVerificationWarning, verify_store
 
     if not os.path.isdir(path):
         raise ValueError(f"{path} is not a directory: give the path of a Zarr store written by granchain ensemble")
     try:
-        ds, unreadable = open_store(path), None  # the records in today's form (a store of an earlier version too)
+        with warnings.catch_warnings():  # verified below, by the readers' own check, with every finding listed
+            warnings.simplefilter("ignore", StoreVerificationWarning)
+            ds, unreadable = open_store(path, verify=False), None  # the records in today's form (earlier versions too)
     except ValueError as exc:
         if stored_parameters(path) is None:
             raise  # not a store: open_store says what to give instead
@@ -58,8 +62,10 @@ def summary(path: str) -> dict:
     params = json.loads(ds.attrs["granchain_parameters"]) if ds is not None else current_record(json.loads(stored))
     R, cs = int(params["realizations"]), int(params["chunk_size"])
     n_chunks = -(-R // cs)
-    done, damaged = verify_chunks(path, R, cs)
-    checksums = damaged is not None
+    found = verify_store(path, "all")  # what open_store checks, every finding listed
+    done = found.done if found.done is not None else np.zeros(n_chunks, dtype=np.int8)  # unreadable records: none done
+    damaged = {int(j): why for j, why in found.damaged.items()}
+    checksums = found.scheme > 0
     try:
         status = np.asarray(ds["status"].values)
         chains = [str(c) for c in ds["chain"].values]
@@ -78,7 +84,8 @@ def summary(path: str) -> dict:
             "chain_integrators": params.get("chain_integrators"), "realizations": R,
             "seed": params["seed"], "chains": params["chains"], "chunk_size": cs, "chunks_done": int((done == 1).sum()),
             "chunks": n_chunks, "realizations_done": int(done_r), "complete": bool((done == 1).all()),
-            "damaged_chunks": damaged or {}, "checksums": checksums, "unreadable": unreadable, "failed_integrations": failures,
+            "damaged_chunks": damaged, "damaged": found.problems, "checksums": checksums,
+            "checksum_scheme": found.scheme, "unreadable": unreadable, "failed_integrations": failures,
             "status_counts": status_counts, "size_bytes": _size(path), "lock": writing,
             # the writer's version is provenance (root attributes); records name it only before results_version
             "granchain_version": written_by, "results_version": params.get("results_version"),
@@ -154,16 +161,24 @@ def run(args) -> int:
                      "the next run takes the lock over)")
     if info["unreadable"]:
         lines.append(f"damaged      {info['unreadable']}")
+    for reason in info["damaged"]:
+        lines.append(f"damaged      {reason}")
     for j, reason in info["damaged_chunks"].items():
         lines.append(f"damaged      chunk {j} {reason}")
-    if info["damaged_chunks"] or info["unreadable"] or not info["complete"]:
+    if info["damaged_chunks"] or info["damaged"] or info["unreadable"] or not info["complete"]:
         lines.append("to continue  run the same `granchain ensemble ... --out STORE` command again (or run_ensemble with the "
                      "same arguments and out=STORE): damaged and missing chunks are recomputed; a larger --realizations "
                      "extends the store")
     elif not info["checksums"]:
         lines.append(f"unverified   written by granchain {info['granchain_version']}, before chunks were checksummed; "
                      "export with: granchain export STORE FILE.nc")
+    elif info["checksum_scheme"] < 2:
+        lines.append(f"intact       every chunk matches its checksums, which cover the values alone (written by granchain "
+                     f"{info['granchain_version']}: a chunk copied from another store, the averaged pulse and the records "
+                     "are not covered; resuming the store with the same arguments adds those checksums); export with: "
+                     "granchain export STORE FILE.nc")
     else:
-        lines.append("intact       every chunk matches its checksums; export with: granchain export STORE FILE.nc")
+        lines.append("intact       every chunk, the averaged pulse and the parameter record match their checksums; "
+                     "export with: granchain export STORE FILE.nc")
     print("\n".join(lines))
     return 0

@@ -10,6 +10,7 @@ import numpy as np
 from ..solve.integrators import INTEGRATORS
 from ._contacts import add_contact_arguments, apply_to_chain, contacts_from_args
 from ._units import add_unit_arguments, scale_from_args
+from .plot import add_pulse_plot_arguments, pulse_plot_request, write_pulse_plot
 
 
 def _floats(text: str, flag: str = "--radii") -> list[float]:
@@ -20,6 +21,16 @@ def _floats(text: str, flag: str = "--radii") -> list[float]:
         return [float(s) for s in fields]
     except ValueError:
         raise ValueError(f"{flag} expects comma-separated numbers, got {text!r}") from None
+
+
+def _labels(text: str, flag: str) -> list[int]:
+    """Comma-separated whole numbers (1-based granule labels)."""
+    out = []
+    for f in _floats(text, flag):
+        if not (f == f and abs(f) != float("inf") and float(f).is_integer()):
+            raise ValueError(f"{flag} expects comma-separated whole numbers (1-based granule labels such as 2,5), got {text!r}")
+        out.append(int(f))
+    return out
 
 
 #: What a user should know when choosing (every registered integrator is listed, noted or not).
@@ -49,7 +60,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--effective", action="store_true", help="with --small-radii: integrate the effective (undecorated) chain instead")
     p.add_argument("--momentum-conserving", action="store_true", help="with --effective: start granule 1 with m_1/mu_1 instead of velocity 1")
     p.add_argument("--wall", action="store_true", help=(
-        "end the chain in a rigid wall (a granule of infinite radius and mass, contact stiffness sqrt(2 R_M)); "
+        "end the chain in a fixed wall (a granule of infinite radius and mass, contact stiffness sqrt(2 R_M)); "
         "the run stops once the pulse has come back from the wall, and the wall's peak force and impulse are printed"))
     p.add_argument("--forces", action="store_true", help=(
         'also print the peak force of every contact j (between granules j and j+1) and its time '
@@ -62,11 +73,14 @@ def add_parser(subparsers) -> None:
     p.add_argument("--atol", type=float, help=f"absolute tolerance ({', '.join(taking('atol'))})")
     p.add_argument("--dt", type=float, help=f"time step ({', '.join(taking('dt'))})")
     p.add_argument("--json", action="store_true", help=(
-        'print {"granule": [...], "peak_velocity": [...], "peak_time": [...]} only (rescaled); with --wall also "wall": '
+        'print {"granule": [...], "peak_velocity": [...], "peak_time": [...], "ok": true|false, "status": {"name", "code", '
+        '"message"}} only (rescaled; a run that did not succeed still prints its JSON, and the command exits 1); with '
+        '--wall also "wall": '
         '{"peak_force", "peak_force_time", "impulse"}; with physical units also "physical": {"peak_velocity_m_s", '
         '"peak_time_s", "peak_force_N", ..., "scale": {...}}'))
     add_contact_arguments(p, sensor=True)
     add_unit_arguments(p)
+    add_pulse_plot_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -151,13 +165,15 @@ def run(args) -> int:
                              "too (--material or --E/--nu/--rho, --radius, --impact-speed)")
         chain = (chain.with_wall(material=material, granules=units.material) if material is not None
                  else chain.with_wall())
-    chain = apply_to_chain(chain, contacts)
-    sensors = None if args.sensor is None else [int(k) for k in _floats(args.sensor, "--sensor")]
+    chain = apply_to_chain(chain, contacts, args)
+    sensors = None if args.sensor is None else _labels(args.sensor, "--sensor")
     grid = None
     if sensors is not None:  # the sensors' force on a grid over the pulse's passage (and, loaded, its reflection)
         t_end = gc.default_t_max(chain) if chain.static_force > 0 else 2.5 * chain.size + 20.0
         grid = np.arange(0.0, t_end, 0.01)
-    result = gc.simulate(chain, _integrator(args), t_grid=grid, sensors=sensors)
+    plot = pulse_plot_request(args, chain, grid, sensors)  # --plot: checked before the run; the grid (and gauges) it needs
+    result = gc.simulate(chain, _integrator(args), t_grid=grid if plot is None else plot.grid,
+                         sensors=sensors if plot is None else plot.sensors)
     # Decorated (and effective) chains are reported by large-granule index k = 1..N
     # (decorated chain index 2k - 1); a chain from --radii by its own index.
     labels = np.arange(1, result.granule.size + 1) if args.small_radii is not None else result.granule
@@ -167,6 +183,9 @@ def run(args) -> int:
             "granule": [int(k) for k in labels],
             "peak_velocity": [float(v) for v in result.peak_velocity],
             "peak_time": [float(t) for t in result.peak_time],
+            # the run's outcome: a script must not read peaks of a run that did not succeed as results
+            "ok": bool(result.ok),
+            "status": {"name": result.status.name, "code": int(result.status), "message": result.message},
         }
         if args.forces:
             out["peak_force"] = [float(f) for f in result.peak_force]
@@ -205,7 +224,14 @@ def run(args) -> int:
             if units is not None:
                 e += f"; {result.dissipated_energy * units.energy:.6g} J"
             print(e)
+    if plot is not None:
+        path = write_pulse_plot(plot, result, units)
+        if not args.json:
+            print(f"# figure written to {path}")
     if not result.ok:
-        print(f"warning: {result.status.name}: {result.message}", file=sys.stderr)
+        # exit 1 (not 0): a script that checks the exit status, or reads "ok" in --json, must not take these
+        # peaks for results; not 2, which is for refused input
+        print(f"granchain pulse: warning: the run did not succeed ({result.status.name}): {result.message}",
+              file=sys.stderr)
         return 1
     return 0

@@ -23,15 +23,9 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-#: Fewest realisations for which every statistic of the report is defined (the KS distance needs
-#: 5 successful realisations, the stretched-exponential fits 4 granules with a positive mean).
-MIN_REALIZATIONS = 20
-
-
 def run(args) -> int:
-    import os
-
-    from ..paper.reproduce import reproduce
+    from ..paper.reproduce import MIN_REALIZATIONS, reproduce
+    from ..paper.validity import output_directory
     from .ensemble import connect
 
     if args.realizations < MIN_REALIZATIONS:
@@ -39,16 +33,7 @@ def run(args) -> int:
                          "(use --quick for a small first run)")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
-    if not args.out.strip():
-        raise ValueError("--out must be a directory path such as granchain-results, got an empty string")
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        raise ValueError(f"--out {args.out} is an existing file; choose a directory path")
-    try:
-        os.makedirs(args.out, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"--out {args.out}: cannot create it ({exc.strerror}); choose a writable directory") from None
-    if not os.access(args.out, os.W_OK | os.X_OK):
-        raise ValueError(f"--out {args.out} is not writable; choose a writable directory")
+    output_directory(args.out, "--out")
     client = connect(args.scheduler)
     try:
         reproduce(args.out, args.realizations, quick=args.quick, seed=args.seed, client=client, progress=not args.quiet)

@@ -45,6 +45,8 @@ def _measured(store, N: int, dist_label: str) -> dict:
     from ..ensembles.read import open_store
 
     path = Path(store)
+    if not str(store).strip():
+        raise ValueError("--compare must be the path of a granchain ensemble store, got an empty string")
     if not path.exists():
         raise ValueError(f"--compare: no store at {store}; run e.g. `granchain ensemble --large {N} --out {store}` first")
     ds = open_store(path)
@@ -96,12 +98,16 @@ def _summary(pred, meas, k_lo: int = 4) -> str:
 def run(args) -> int:
     from .. import Uniform, theory
     from .._validate import count
+    from ..design.preflight import output_directory
 
     N = count("--large", args.large, minimum=2)
     dist = Uniform(args.alpha, args.beta)
+    # Everything that can be checked without the prediction is checked first: a prediction of a new law
+    # tabulates for tens of seconds, and its result must not be lost to a path that cannot be written.
+    out_dir = None if args.out is None else output_directory(args.out, "--out")
+    meas = _measured(args.compare, N, dist.label()) if args.compare is not None else None
     pred = theory.predict(dist, N, args.n, samples=args.samples, seed=args.seed, memory=args.memory,
                           lookahead=args.lookahead, nodes=args.nodes, stiffness_disorder=not args.no_stiffness_disorder)
-    meas = _measured(args.compare, N, dist.label()) if args.compare else None
     if args.json:
         out = {name: pred[name].values.tolist() for name in pred.data_vars}
         out.update({k: v for k, v in pred.attrs.items() if isinstance(v, (int, float, str))})
@@ -115,7 +121,7 @@ def run(args) -> int:
     if meas is not None:
         text += "\n\n" + _summary(pred, meas)
     print(text)
-    if args.out:
+    if out_dir is not None:
         import matplotlib
 
         matplotlib.use("Agg")
@@ -124,7 +130,7 @@ def run(args) -> int:
         from ..paper.figures import save
         from ..paper.figures import theory as figure
 
-        out = Path(args.out)
+        out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         pred.to_netcdf(out / "theory.nc")
         (out / "theory.md").write_text(text + "\n")

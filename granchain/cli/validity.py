@@ -13,8 +13,6 @@ realisations per point) 12 minutes; ``--distributions`` 75 s more.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 
 def _floats(text: str) -> tuple:
     try:
@@ -60,7 +58,9 @@ def run(args) -> int:
     for key, value in (("alphas", args.alphas), ("betas", args.betas), ("n_large", args.large), ("realizations", args.realizations)):
         if value is not None:
             base[key] = value
-    out = Path(args.out)
+    out = validity.output_directory(args.out, "--out", create=False)  # refused before the map starts
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
     ds = figure.compute(out, seed=args.seed, blocks=args.blocks, progress=not args.no_progress, **base)
     fig = figure.plot(ds)
     paths = save(fig, out / "validity")

@@ -143,8 +143,9 @@ class BatchEvaluator:
         if workers is not None and hasattr(workers, "scheduler_info") and hasattr(workers, "gather"):
             client, workers = (workers if client is None else client), None  # a Dask client given as workers
         if workers is not None and not callable(workers):
-            raise ValueError(f"workers must be a map-like callable, workers(func, iterable) (e.g. multiprocessing.Pool(2).map, "
-                             f"an Executor's map or a Dask client's map), or a Dask client; got {workers!r}")
+            raise ValueError(f"workers must be a function workers(func, iterable) that applies func to each item, as "
+                             f"multiprocessing.Pool(2).map, an Executor's map or a Dask client's map do, or a Dask client; "
+                             f"got {workers!r}")
         if client is not None and workers is not None:
             raise ValueError("give either client (a Dask client) or workers (a map-like callable), not both")
         self.workers = workers
@@ -152,6 +153,7 @@ class BatchEvaluator:
         self.space = space
         self.objective = get_objective(objective)
         self.objective.check(space.wall)
+        self.objective.bind(space.granules)  # e.g. a sensor's contact must exist in these chains
         self.integrator = default_integrator(space) if integrator is None else get_integrator(integrator)
         self.statistic = _check_statistic(statistic)
         self.client = client
@@ -161,6 +163,8 @@ class BatchEvaluator:
 
     def __call__(self, X) -> Evaluation:
         X = self.space.as_array(X)
+        if X.shape[0] == 0:
+            return Evaluation(np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64))
         if self.workers is not None and X.shape[0] >= 2:
             import os
             from functools import partial

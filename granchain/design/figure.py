@@ -42,7 +42,7 @@ def compute(result, dt: float = 0.02) -> dict:
     else the last granule's velocity) of the best chain and of the two monodisperse references."""
     same, k, radius, mismatch = length_and_mass_chain(result)
     size = result.reference_chain.size - int(result.reference_chain.wall)
-    chains = {"best design": result.chain, f"monodisperse, {size} granules of radius 1 (same number)": result.reference_chain,
+    chains = {"design found": result.chain, f"monodisperse, {size} granules of radius 1 (same number)": result.reference_chain,
               f"granule 1 + {k} of radius {radius:.3g}: same mass and length ({mismatch:+.1%})": same}
     integ = result.integrator
     t_end = max(float(simulate(ch, integ).t_end) for ch in chains.values())

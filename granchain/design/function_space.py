@@ -20,7 +20,7 @@ class FunctionSpace(DesignSpace):
     :func:`granchain.from_radii`) or ``-> Chain``, with ``params`` a dict by name; ``bounds`` a dict
     name -> (low, high). Every design must give a chain of the same size. Chains are built in Python
     one design at a time (the ready spaces build whole generations with NumPy) and integrated as one
-    batch like the others. ``wall=True`` adds a rigid wall to radii builds (a Chain brings its own)."""
+    batch like the others. ``wall=True`` adds a fixed wall of the granules' material to radii builds (a Chain brings its own)."""
 
     build_fn: Callable = field(default=None, repr=False)
 
@@ -64,6 +64,10 @@ class FunctionSpace(DesignSpace):
                 raise ValueError("the design function returned a chain with real contacts (dissipation, precompression or a "
                                  "striker): design spaces run the paper's elastic contacts")
         return chains
+
+    @property
+    def granules(self) -> int:
+        return int(self._probe.size - int(self._probe.wall))
 
     @property
     def wall_of_chains(self) -> bool:

@@ -36,7 +36,8 @@ __all__ = [
 
 class Objective:
     """Base of the objectives. ``sense`` is +1 when smaller is better, -1 when larger is better;
-    ``boundary`` is "wall" (needs a chain ending in a rigid wall), "free" (needs a free end) or "any"."""
+    ``boundary`` is "wall" (needs a chain ending in a fixed wall: immovable, of the granules' material, contact
+    stiffness sqrt(2 R_M); not the infinitely stiff ``wall_material="rigid"`` of :meth:`granchain.Chain.with_wall`), "free" (needs a free end) or "any"."""
 
     name: ClassVar[str]
     long_name: ClassVar[str]
@@ -44,13 +45,22 @@ class Objective:
     boundary: ClassVar[str] = "any"
     sense: int = 1
 
+    def __post_init__(self):
+        if self.sense not in (1, -1) or isinstance(self.sense, bool):
+            raise ValueError(f"sense must be +1 (smaller is better) or -1 (larger is better), got {self.sense!r}")
+
+    def bind(self, size: int) -> None:
+        """Refuse a chain of ``size`` granules (the wall excluded) this objective cannot read, before any
+        integration."""
+        self.contacts(size)
+
     def check(self, wall: bool) -> None:
         """Refuse a chain whose end this objective cannot judge, saying what to change."""
         if self.boundary == "wall" and not wall:
-            raise ValueError(f"the objective {self.name!r} ({self.long_name}) needs a chain that ends in a rigid wall: "
+            raise ValueError(f"the objective {self.name!r} ({self.long_name}) needs a chain that ends in a fixed wall: "
                              "build the space with wall=True (CLI: the design sub-command adds the wall for this objective)")
         if self.boundary == "free" and wall:
-            raise ValueError(f"the objective {self.name!r} ({self.long_name}) needs a free far end (a rigid wall does no work, "
+            raise ValueError(f"the objective {self.name!r} ({self.long_name}) needs a free far end (a fixed wall does no work, "
                              "so it takes no energy): build the space with wall=False, or judge the wall by 'wall-force' "
                              "or 'impulse-duration'")
 
@@ -77,7 +87,7 @@ class Objective:
 
 @dataclass(frozen=True)
 class WallForce(Objective):
-    """The peak force on the rigid wall, max_t c_M delta_M(t)^(n-1) (the wall contact of Eq.
+    """The peak force on the fixed wall (immovable, of the granules' material), max_t c_M delta_M(t)^(n-1) (the wall contact of Eq.
     motion_rescaled, stiffness sqrt(2 R_M), the limit of Eq. r-prime): what a protector transmits
     to what it protects. Minimised."""
 
@@ -104,6 +114,12 @@ class SensorForce(Objective):
     name: ClassVar[str] = "sensor-force"
     long_name: ClassVar[str] = "peak force of a contact"
     kind: ClassVar[str] = "force"
+
+    def __post_init__(self):
+        super().__post_init__()
+        from .._validate import count
+
+        object.__setattr__(self, "granule", count("granule", self.granule, minimum=1))
 
     def contacts(self, size):
         if not 1 <= self.granule < size:
@@ -155,7 +171,7 @@ class TransmittedEnergy(Objective):
 @dataclass(frozen=True)
 class TransmittedMomentum(Objective):
     """The momentum transmitted, as a fraction of the input m_1 v_1: with a free end, the last
-    granule's at its peak velocity, m_M v_M; against a rigid wall, the impulse the wall takes,
+    granule's at its peak velocity, m_M v_M; against a fixed wall, the impulse the wall takes,
     P_0 - P_end (:attr:`granchain.PulseResult.wall_impulse`; 2 for one granule bouncing back, more
     when the chain comes back in pieces). Minimised."""
 
@@ -193,7 +209,12 @@ class ImpulseDuration(Objective):
     boundary: ClassVar[str] = "wall"
 
     def __post_init__(self):
-        if not 0.0 < float(self.fraction) < 1.0:
+        super().__post_init__()
+        try:
+            fraction = float(self.fraction)
+        except (TypeError, ValueError):
+            fraction = float("nan")
+        if not 0.0 < fraction < 1.0:
             raise ValueError(f"fraction = {self.fraction!r} is the share of the impulse whose duration is measured: give 0 < fraction < 1")
 
     def route(self, wall):

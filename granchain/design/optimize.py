@@ -6,8 +6,10 @@ of the compiled ensemble kernel (:class:`granchain.design.BatchEvaluator`; a Das
 over workers). Constraints are SciPy ``NonlinearConstraint`` s (Lampinen's feasibility rules: an
 infeasible design is never integrated). A local refinement (``"powell"`` or ``"nelder-mead"``,
 ``scipy.optimize.minimize`` within the bounds) polishes the best design with what is left of the
-budget. Both are deterministic for a seed, and every evaluation goes into the run's history
-(:class:`granchain.design.history.History`), which makes a run resumable.
+budget. For one or two real parameters a final bounded polish (``_polish``: a local grid, then
+SciPy's bounded Brent or Nelder-Mead) follows, on top of the budget. All are deterministic for a seed,
+and every evaluation goes into the run's history (:class:`granchain.design.history.History`), which
+makes a run resumable. The result carries the evidence of convergence (:func:`_convergence`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from .._version import __version__
 from .evaluate import BatchEvaluator
 from .history import History
 from .result import DesignResult
+from .space import DesignSpace
 
 __all__ = ["LOCAL_METHODS", "minimum_budget", "optimize"]
 
@@ -35,6 +38,36 @@ _BARRIER = 1e30
 
 class _BudgetSpent(Exception):
     pass
+
+
+class _EvaluationError(Exception):
+    """An evaluation failed. Not a ValueError or TypeError on purpose: SciPy's differential evolution
+    replaces those, raised inside its map, by its own words about the map-like callable; this one passes
+    through and :func:`optimize` raises it again as the ValueError it carries."""
+
+    def __init__(self, error: ValueError):
+        super().__init__(str(error))
+        self.error = error
+
+
+def _failure(space, X: np.ndarray, exc: BaseException) -> ValueError:
+    """The error of a failed evaluation of designs X: the design that failed (found by building each
+    design's chain alone, which costs no integration) and the cause, with what to change."""
+    cause = f"{type(exc).__name__}: {exc}" if not isinstance(exc, ValueError) else str(exc)
+    which = None
+    for x in X:
+        try:
+            space.batch(x[None])
+        except Exception as one:  # noqa: BLE001 -- the first design whose chain cannot be built
+            which, cause = x, (f"{type(one).__name__}: {one}" if not isinstance(one, ValueError) else str(one))
+            break
+    if which is None:
+        where = (f"the design {space.params(X[0])}" if X.shape[0] == 1
+                 else f"one of {X.shape[0]} designs evaluated together (the first: {space.params(X[0])})")
+    else:
+        where = f"the design {space.params(which)}"
+    return ValueError(f"evaluating {where} failed: {cause}. Every design within the bounds must give a valid chain, of one "
+                      "size for all: narrow the bounds (or fix the design function) to exclude it")
 
 
 def population_size(space, popsize: int) -> int:
@@ -52,8 +85,9 @@ def minimum_budget(space, popsize: int = 10, local: str | None = "powell") -> in
 class _Progress:
     """A bar of evaluations (terminal or notebook), one line per batch otherwise, or nothing."""
 
-    def __init__(self, total: int, enabled: bool, label: str):
-        self.enabled, self.total, self.done, self.t0, self.bar = bool(enabled), total, 0, time.monotonic(), None
+    def __init__(self, total: int, enabled: bool, label: str, extra: int = 0):
+        self.enabled, self.total, self.done, self.t0, self.bar = bool(enabled), total + extra, 0, time.monotonic(), None
+        self.budget, self.extra = total, extra  # the budget, and at most ``extra`` evaluations of the polish on top
         self.last = 0.0
         if self.enabled and ("ipykernel" in sys.modules or bool(getattr(sys.stderr, "isatty", lambda: False)())):
             from tqdm.auto import tqdm
@@ -83,13 +117,21 @@ class _Progress:
         elif self.enabled and self.done and self.done < self.total:
             rate = self.done / max(time.monotonic() - self.t0, 1e-9)
             tail = "" if best is None else f", best {best:.6g}"
-            print(f"{self.done} evaluations (of a budget of {self.total}) done{tail}, {rate:.1f}/s", file=sys.stderr, flush=True)
+            polish = f" and at most {self.extra} of the polish" if self.extra else ""
+            print(f"{self.done} evaluations (of a budget of {self.budget}{polish}) done{tail}, {rate:.1f}/s", file=sys.stderr,
+                  flush=True)
 
 
 def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int = 10, local: str | None = "powell",
              statistic="mean", integrator=None, out=None, resume: bool = True, client=None, workers=None, progress: bool = False,
-             mutation=(0.5, 1.0), recombination: float = 0.7) -> DesignResult:
-    """The best design of ``space`` for ``objective`` within ``budget`` evaluations.
+             mutation=(0.5, 1.0), recombination: float = 0.7, polish: bool = True) -> DesignResult:
+    """Search ``space`` for the design that does best for ``objective`` within ``budget`` evaluations; the
+    result says how sure it is (:attr:`DesignResult.convergence`: a search that stops at its budget has
+    found the best design it evaluated, not a proven optimum).
+
+    Every check that needs no integration comes first (arguments, chain size, whether any design meets
+    the constraints, the output directory: :mod:`granchain.design.preflight`); a design whose evaluation
+    fails stops the run with a ValueError naming the design and the cause.
 
     Parameters
     ----------
@@ -129,8 +171,18 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
         compiled kernels run on GNU OpenMP threads, which a forked process cannot use.
     progress : bool
         A progress bar (one line per generation when stderr is not a terminal).
+    polish : bool
+        For a space of one or two real parameters: a last bounded local search from the best design
+        (``_polish``, at most ``POLISH_EVALUATIONS`` evaluations on top of the budget), which can
+        only improve the result. Its change is reported in :attr:`DesignResult.convergence`.
     """
 
+    from .preflight import check_feasible, check_size, output_directory
+
+    if not isinstance(space, DesignSpace):
+        raise ValueError(f"space must be a granchain.design space (TaperedSpace, DecoratedSpace, BinarySpace, "
+                         f"RandomDecoratedSpace or FunctionSpace), got {space!r}")
+    check_size(space)  # before the evaluator: a sensor objective asks the chains' size
     evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client, workers=workers)
     objective = evaluator.objective
     popsize = count("popsize", popsize, minimum=2)
@@ -153,29 +205,34 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
     record = {"space": space.describe(), "objective": objective.describe(), **evaluator.describe(), "seed": seed,
               "popsize": popsize, "local": local, "mutation": list(np.atleast_1d(mutation).astype(float)),
               "recombination": float(recombination)}
-    from os import fspath, makedirs
+    from contextlib import nullcontext
+    from os import makedirs
     from os import path as osp
 
-    lock = None
+    polish = bool(polish)
+    check_feasible(space)  # a request no design can meet is refused here, not after a run of NaNs
     if out is not None:
-        makedirs(fspath(out), exist_ok=True)
+        out = output_directory(out)
+        makedirs(out, exist_ok=True)
         # One run at a time per directory (a run started again while the interrupted one is still ending,
-        # or twice): the ensembles' store lock, on the history (a ValueError naming the holder's PID).
+        # or twice): the ensembles' store lock, on the history (a ValueError naming the holder's PID),
+        # released on every way out of the run (an error, an interrupt).
         from ..ensembles.lock import StoreLock
 
-        lock = StoreLock(osp.join(fspath(out), "history.zarr"))
-        lock.acquire()
-    try:
-        return _run(space, objective, evaluator, record, budget=budget, seed=seed, popsize=popsize, local=local,
-                    maxiter=maxiter, snap_budget=snap_budget, out=out, resume=resume, progress=progress, mutation=mutation,
-                    recombination=recombination)
-    finally:
-        if lock is not None:
-            lock.release()
+        lock = StoreLock(osp.join(out, "history.zarr"))
+    else:
+        lock = nullcontext()
+    with lock:
+        try:
+            return _run(space, objective, evaluator, record, budget=budget, seed=seed, popsize=popsize, local=local,
+                        maxiter=maxiter, snap_budget=snap_budget, out=out, resume=resume, progress=progress,
+                        mutation=mutation, recombination=recombination, polish=polish)
+        except _EvaluationError as exc:
+            raise exc.error from exc.__cause__
 
 
 def _run(space, objective, evaluator, record, *, budget, seed, popsize, local, maxiter, snap_budget, out, resume, progress,
-         mutation, recombination) -> DesignResult:
+         mutation, recombination, polish) -> DesignResult:
     """The search itself (``optimize`` checked the arguments and holds the run directory's lock)."""
     from os import fspath
     from os import path as osp
@@ -183,21 +240,28 @@ def _run(space, objective, evaluator, record, *, budget, seed, popsize, local, m
     from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
 
     history = History(space.names, record, None if out is None else osp.join(fspath(out), "history.zarr"), resume)
-    bar = _Progress(budget, progress, f"design {space.kind}")
+    will_polish = polish and not space.integer and space.dim <= POLISH_DIM
+    bar = _Progress(budget, progress, f"design {space.kind}", POLISH_EVALUATIONS[space.dim] if will_polish else 0)
     best = [np.inf]
 
     def evaluate(X: np.ndarray, stage: str) -> np.ndarray:
         found, value, stderr, failed = history.lookup(X)
         todo = ~found
         if todo.any():
-            ev = evaluator(X[todo])
+            try:
+                ev = evaluator(X[todo])
+            except (KeyboardInterrupt, _BudgetSpent, _EvaluationError):
+                raise
+            except Exception as exc:  # noqa: BLE001 -- named and carried past SciPy (see _EvaluationError)
+                raise _EvaluationError(_failure(space, X[todo], exc)) from exc
             value[todo], stderr[todo], failed[todo] = ev.value, ev.stderr, ev.failed
         history.add(X, value, stderr, failed, stage)
         history.replayed += int(found.sum())
         if todo.any():
             history.flush(force=False)
         f = np.where(np.isfinite(value), objective.sense * value, _BARRIER)
-        best[0] = min(best[0], float(f.min()))
+        if f.size:
+            best[0] = min(best[0], float(f.min()))
         bar.update(X.shape[0], objective.sense * best[0], history.replayed)
         return f
 
@@ -206,7 +270,14 @@ def _run(space, objective, evaluator, record, *, budget, seed, popsize, local, m
 
     constraints = ()
     if space.constraints.active or hasattr(space, "min_width"):
-        constraints = NonlinearConstraint(lambda x: space.violation(np.atleast_2d(np.asarray(x).T))[None], -np.inf, 0.0)
+        def violation(x):
+            X = np.atleast_2d(np.asarray(x).T)
+            try:
+                return space.violation(X)[None]
+            except Exception as exc:  # noqa: BLE001 -- named and carried past SciPy (see _EvaluationError)
+                raise _EvaluationError(_failure(space, X, exc)) from exc
+
+        constraints = NonlinearConstraint(violation, -np.inf, 0.0)
     try:
         de = differential_evolution(de_func, space.bounds, maxiter=maxiter, popsize=popsize, tol=0.0, atol=0.0,
                                     mutation=mutation, recombination=recombination, rng=np.random.default_rng(seed),
@@ -234,11 +305,16 @@ def _run(space, objective, evaluator, record, *, budget, seed, popsize, local, m
                 message += f"; {LOCAL_METHODS[local]} refinement stopped at the budget ({left} evaluations)"
         if history.count < budget:
             message += _snap_to_bounds(space, history, objective, budget - history.count, evaluate)
+        before = objective.sense * float(np.min(np.where(np.isfinite(history.value), objective.sense * history.value, np.inf)))
+        polished = None
+        if will_polish and np.isfinite(before):
+            polished = _polish(space, history, objective, evaluate)
+        convergence = _convergence(history, objective, de, before, polished, population_size(space, popsize))
     finally:
         history.flush()
         bar.close(objective.sense * best[0] if np.isfinite(best[0]) else None)
     result = DesignResult.from_history(space, objective, evaluator, history, seed=seed, budget=budget, message=message,
-                                       version=__version__)
+                                       version=__version__, convergence=convergence)
     if out is not None:
         result.save(out)
     return result
@@ -279,3 +355,91 @@ def _snap_to_bounds(space, history, objective, left: int, evaluate) -> str:
 def _best_x(history: History, objective) -> np.ndarray:
     f = np.where(np.isfinite(history.value), objective.sense * history.value, np.inf)
     return history.x[int(np.argmin(f))]
+
+
+#: Spaces of at most this many real parameters get the final polish (a local grid is affordable there).
+POLISH_DIM = 2
+#: The polish's local grid spans +-POLISH_WIDTH of each parameter's range around the best design.
+POLISH_WIDTH = 0.01
+#: Evaluations the polish may spend (on top of the budget): a grid of 21 (one parameter) or 7 x 7 (two)
+#: designs, then a bounded Brent or Nelder-Mead search.
+POLISH_EVALUATIONS = {1: 60, 2: 110}
+
+
+def _polish(space, history, objective, evaluate) -> dict:
+    """A bounded local search from the best design, for one or two real parameters.
+
+    A design objective such as the peak wall force is deterministic but rugged at fine scales (a tapered
+    chain's wall force changes by tens of per cent between q values 1e-4 apart, as the last granules'
+    collisions reorder), so a smooth local method alone stops in the nearest dimple. The polish first
+    evaluates a local grid (+-:data:`POLISH_WIDTH` of each range, 21 designs in 1-D, 7 x 7 in 2-D, one
+    batch), then runs SciPy's bounded Brent (``minimize_scalar(method="bounded")``, 1-D) or Nelder-Mead
+    within the bounds (2-D) from the best node, within the cell around it. Every evaluation goes into the
+    history, so the result can only improve. Returns what it did."""
+    from scipy.optimize import minimize, minimize_scalar
+
+    D = space.dim
+    x0 = _best_x(history, objective)
+    span = space.upper - space.lower
+    lo = np.maximum(space.lower, x0 - POLISH_WIDTH * span)
+    hi = np.minimum(space.upper, x0 + POLISH_WIDTH * span)
+    count0 = history.count
+    limit = POLISH_EVALUATIONS[D]
+    axes = [np.linspace(lo[j], hi[j], 21 if D == 1 else 7) for j in range(D)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, D)
+    ok = space.violation(grid) <= 0.0
+    if ok.any():
+        evaluate(grid[ok], "local")
+    x1 = _best_x(history, objective)
+    step = np.array([a[1] - a[0] for a in axes])
+    cell_lo, cell_hi = np.maximum(space.lower, x1 - step), np.minimum(space.upper, x1 + step)
+
+    def one(x):
+        if history.count - count0 >= limit:
+            raise _BudgetSpent
+        x = np.clip(np.atleast_1d(np.asarray(x, dtype=float)), space.lower, space.upper)
+        if space.violation(x[None])[0] > 0.0:
+            return _BARRIER
+        return float(evaluate(x[None], "local")[0])  # sense x value, or the barrier for a failed design
+
+    method = "bounded Brent" if D == 1 else "Nelder-Mead"
+    try:
+        if D == 1:
+            res = minimize_scalar(lambda q: one([q]), bounds=(float(cell_lo[0]), float(cell_hi[0])), method="bounded",
+                                  options={"xatol": 1e-8 * float(span[0]), "maxiter": limit})
+        else:
+            res = minimize(one, x1, method="Nelder-Mead", bounds=list(zip(cell_lo, cell_hi)),
+                           options={"xatol": 1e-8 * float(span.min()), "fatol": 1e-12, "maxfev": limit})
+        status = f"{method}: {res.message}"
+    except _BudgetSpent:
+        status = f"{method}: stopped at its {limit} evaluations"
+    return {"evaluations": history.count - count0, "method": f"local grid of {grid.shape[0]} designs, then {method}",
+            "status": status}
+
+
+#: Generations of differential evolution over which the last improvement is reported.
+LAST_GENERATIONS = 3
+
+
+def _convergence(history, objective, de, before: float, polished: dict | None, S: int) -> dict:
+    """The evidence of how near the optimum a run came, for the summary (instead of calling it "best"):
+    the global search's own flag and message, how much its last :data:`LAST_GENERATIONS` generations
+    improved the best value (a search still improving has not converged), the evaluations used, and the
+    polish's change of the value (a large change means the search had not settled)."""
+    sense = objective.sense
+    f = np.where(np.isfinite(history.value), sense * history.value, np.inf)
+    glob = np.flatnonzero(history.stage == History.STAGES["global"])
+    out = {"evaluations": int(history.count), "optimizer_converged": bool(de.success), "optimizer_message": str(de.message),
+           "generations": int(max(glob.size // S - 1, 0)) if S else 0}
+    if glob.size > S:
+        running = np.minimum.accumulate(f[glob])
+        k = min(LAST_GENERATIONS, glob.size // S - 1)
+        then, now = running[-1 - k * S], running[-1]
+        out["last_generations"] = k
+        out["improvement_last_generations"] = float((then - now) / abs(then)) if np.isfinite(then) and then != 0 else None
+    final = float(np.min(f)) if np.isfinite(f).any() else float("nan")
+    out["value_before_polish"] = before
+    out["value"] = sense * final
+    if polished is not None:
+        out["polish"] = {**polished, "change": float((sense * final - before) / abs(before)) if before else None}
+    return out

@@ -40,6 +40,12 @@ class DesignResult:
         Evaluations of the run (including those replayed from a saved history).
     history : xarray.Dataset
         Every evaluation (dims ``evaluation``, ``parameter``).
+    convergence : dict
+        How sure the result is: the global search's flag and message (``optimizer_converged``,
+        ``optimizer_message``), the relative improvement of its last generations
+        (``improvement_last_generations``), the evaluations used, the value before the final polish and,
+        for one or two real parameters, the polish's method, evaluations and relative change (``polish``).
+        :meth:`convergence_text` says it in words (the summary's "how sure" line).
     """
 
     space: object
@@ -59,9 +65,11 @@ class DesignResult:
     budget: int = 0
     message: str = ""
     version: str = ""
+    convergence: dict = field(default_factory=dict)
 
     @classmethod
-    def from_history(cls, space, objective, evaluator, history, *, seed, budget, message, version) -> DesignResult:
+    def from_history(cls, space, objective, evaluator, history, *, seed, budget, message, version,
+                     convergence=None) -> DesignResult:
         f = np.where(np.isfinite(history.value), objective.sense * history.value, np.inf)
         if not np.isfinite(f).any():
             raise ValueError("no design of the run was feasible and integrated: widen the bounds or relax the constraints")
@@ -75,7 +83,7 @@ class DesignResult:
         ref_value = float(evaluate_chains(ref_batch, objective, evaluator.integrator)[0][0])
         return cls(space, objective, x, space.params(x), space.chain(x), float(history.value[i]), float(history.stderr[i]), ref,
                    ref_value, history.count, history.dataset(), evaluator.integrator, evaluator.statistic, seed, budget,
-                   message, version)
+                   message, version, dict(convergence or {}))
 
     @property
     def best_radii(self) -> np.ndarray:
@@ -95,13 +103,14 @@ class DesignResult:
             "best_value": _num(self.value),
             "best_stderr": _num(self.stderr) if self.space.random else None,
             "reference": {"chain": f"monodisperse, {self.reference_chain.size - int(self.reference_chain.wall)} granules of radius 1"
-                                   + (", rigid wall" if self.reference_chain.wall else ", free end"),
+                                   + (", fixed wall of the granules' material" if self.reference_chain.wall else ", free end"),
                           "value": _num(self.reference_value)},
             "n_evaluations": int(self.n_evaluations),
             "budget": int(self.budget),
             "seed": int(self.seed),
             "integrator": None if self.integrator is None else self.integrator.describe(),
             "message": self.message,
+            "convergence": {k: (_num(v) if isinstance(v, float) else v) for k, v in self.convergence.items()},
             "granchain_version": self.version,
         }
 
@@ -132,15 +141,40 @@ class DesignResult:
             "",
             f"- objective: {obj.long_name} ({'minimised' if obj.sense > 0 else 'maximised'})"
             + (f", {self.statistic} over {self.space.realizations} realisations (common to every design)" if self.space.random else ""),
-            f"- best design: {params}",
-            f"- best value: {value:.6g}{unit}{err}",
+            f"- design found: {params}",
+            f"- its value: {value:.6g}{unit}{err}",
             f"- monodisperse chain of the same size: {ref:.6g}{unit} (ratio {ratio:.4g})",
-            f"- evaluations: {self.n_evaluations} of a budget of {self.budget}; {self.message}",
+            f"- evaluations: {self.n_evaluations} (budget {self.budget}"
+            + (f", plus {self.convergence['polish']['evaluations']} of the polish" if "polish" in self.convergence else "")
+            + f"); {self.message}",
+            f"- how sure: {self.convergence_text()}",
             f"- radii (granule 1 first, rescaled): {np.array2string(self.best_radii, precision=4, max_line_width=100)}",
         ]
         if scale is not None:
             lines.append(f"- units: {scale}")
         return "\n".join(lines) + "\n"
+
+    def convergence_text(self) -> str:
+        """How near the optimum the run came, in words: the global search's flag, its last generations'
+        improvement and the polish's change (a search stops at its budget; that alone proves nothing)."""
+        c = self.convergence
+        if not c:
+            return "no convergence record (a result from an older granchain)"
+        parts = [("the global search reports convergence" if c.get("optimizer_converged")
+                  else "the global search stopped without converging") + f" ({c.get('optimizer_message', '').rstrip('.')})"]
+        imp = c.get("improvement_last_generations")
+        if imp is not None:
+            parts.append(f"its last {c['last_generations']} generations improved the value by {100 * imp:.3g} %")
+        pol = c.get("polish")
+        if pol:
+            change = pol.get("change")
+            parts.append(f"the final polish ({pol['method']}; {pol['status'].rstrip('.')}) changed it by "
+                         + ("n/a" if change is None else f"{100 * change:+.3g} %"))
+        else:
+            parts.append("no final polish (it is run for one or two real parameters)")
+        verdict = ("a local optimum to within the polish's resolution; other optima of a rugged objective may lie elsewhere"
+                   if pol else "the optimum of the designs evaluated, not a proven optimum of the space")
+        return "; ".join(parts) + f". This is {verdict}"
 
     def plot(self, scale=None, fig=None):
         """The convergence and the best design's wall force (or last granule's velocity) against the

@@ -129,6 +129,11 @@ class DesignSpace:
         return list(zip(self.lower.tolist(), self.upper.tolist()))
 
     @property
+    def granules(self) -> int:
+        """Granules of each chain of the space (the wall excluded)."""
+        return int(self.radii(0.5 * (self.lower + self.upper)[None]).shape[1])
+
+    @property
     def random(self) -> bool:
         return self.realizations > 1
 

@@ -1,9 +1,16 @@
-"""One writer per store: an advisory lock file ``STORE.lock`` next to the store.
+"""One writer per store: an advisory lock file ``STORE.lock`` next to the store, there only while a
+writer holds it.
 
 The lock is an ``fcntl.flock`` on that file (released by the kernel when its holder exits, even
 after ``kill -9``), and the file records the holder's PID, host and start time for messages. A lock
-file whose holder is gone is therefore simply taken over (a warning names the old holder). On file
-systems without ``flock`` (some network mounts) it falls back to creating the file with
+file whose holder is gone (killed) is therefore simply taken over (a warning names the old holder).
+:meth:`StoreLock.release` deletes the file while still holding the lock; a process that opened the file
+just before and is granted the lock just after finds that the path no longer names the file it locked,
+and starts over on the file now at the path (so two writers never hold locks on two different files).
+Every user of the lock (ensemble stores, the design history ``OUT/history.zarr.lock``) calls
+``release()`` (or uses ``with StoreLock(path):``) when it ends, also on errors and interruptions.
+
+On file systems without ``flock`` (some network mounts) it falls back to creating the file with
 ``O_CREAT | O_EXCL``; a lock left by a process that no longer runs on this host is then taken over.
 """
 
@@ -76,21 +83,27 @@ class StoreLock:
     def acquire(self) -> None:
         import fcntl
 
-        try:
-            fd = os.open(self.file, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise ValueError(f"out = {self.store}: cannot write there ({exc.strerror} for {self.file}); "
-                             "choose a writable path") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            self._refuse(self._current_holder())
-        except OSError as exc:
-            os.close(fd)
-            if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
-                return self._acquire_exclusive()
-            raise
+        for _ in range(100):  # each retry follows a release that deleted the file between our open and lock
+            try:
+                fd = os.open(self.file, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise ValueError(f"out = {self.store}: cannot write there ({exc.strerror} for {self.file}); "
+                                 "choose a writable path") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                self._refuse(self._current_holder())
+            except OSError as exc:
+                os.close(fd)
+                if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
+                    return self._acquire_exclusive()
+                raise
+            if self._names(fd):
+                break
+            os.close(fd)  # locked a file its holder deleted on release: start over on the one at the path now
+        else:
+            self._refuse(self.holder())
         previous = self.holder()
         if isinstance(previous, dict) and previous.get("pid") is not None and not previous.get("released"):
             warnings.warn(f"took over the stale lock {self.file} of PID {previous.get('pid')} on host "
@@ -99,6 +112,14 @@ class StoreLock:
         os.pwrite(fd, self._record(), 0)
         os.fsync(fd)
         self._fd = fd
+
+    def _names(self, fd) -> bool:
+        """Whether the lock file's path still names the open file ``fd``."""
+        try:
+            st, mine = os.stat(self.file), os.fstat(fd)
+        except OSError:
+            return False
+        return (st.st_ino, st.st_dev) == (mine.st_ino, mine.st_dev)
 
     def _acquire_exclusive(self) -> None:
         """Fallback without flock: O_EXCL creation; a dead holder on this host is taken over."""
@@ -120,6 +141,7 @@ class StoreLock:
         self._refuse(self.holder())
 
     def release(self) -> None:
+        """Give the lock up and delete the lock file (idempotent)."""
         if self._exclusive:
             self._exclusive = False
             try:
@@ -130,14 +152,17 @@ class StoreLock:
             return
         import fcntl
 
+        fd, self._fd = self._fd, None
         try:
-            record = json.loads(self._record())
-            os.ftruncate(self._fd, 0)
-            os.pwrite(self._fd, json.dumps({**record, "released": True}).encode(), 0)
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            if self._names(fd):  # deleted while held: whoever locks the old file next sees it is gone
+                os.unlink(self.file)
+        except OSError:
+            pass
         finally:
-            os.close(self._fd)
-            self._fd = None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_UN)
+            finally:
+                os.close(fd)
 
     def __enter__(self):
         self.acquire()

@@ -31,7 +31,7 @@ _WHAT_TO_GIVE = ("give the path of an ensemble store written by `granchain ensem
                  "granchain.run_ensemble(..., out=PATH), or a netCDF file written by `granchain export`")
 
 
-def open_store(path, *, group: str | None = None, load: bool = False):
+def open_store(path, *, group: str | None = None, load: bool = False, verify: bool = True):
     """An ensemble store as an ``xarray.Dataset``, read in the form this version writes.
 
     Every granchain reader (the analysis, the figures, ``granchain info``, ``export``, ``theory``, the
@@ -50,6 +50,18 @@ def open_store(path, *, group: str | None = None, load: bool = False):
         (Zarr stores only).
     load : bool
         False: lazy (Dask arrays, read when used). True: every value read into memory.
+    verify : bool
+        True (default): the store is checked against what its writer recorded
+        (:mod:`granchain.ensembles.verify`, the check ``granchain info`` reports): the parameter record
+        and root attributes against their digest, every finished chunk read against its checksum (keyed by
+        the store, the variable and the chunk), the averaged pulse against its own. Values are hashed as
+        they are read: with ``load=True`` at once, lazily as each chunk is computed (a missing data file,
+        an edited record or a damaged averaged pulse is found at once). What does not match is refused
+        with :class:`~granchain.ensembles.verify.StoreDamagedError` (a ``ValueError``) naming the file and
+        how to repair it (running the ensemble again with the same arguments recomputes damaged chunks).
+        False: read without checking, with a :class:`~granchain.ensembles.verify.StoreVerificationWarning`.
+        Stores written before the checksums were keyed are checked as far as their checksums go (values
+        alone); a store of granchain 0.1.0 has none.
 
     Returns
     -------
@@ -69,10 +81,16 @@ def open_store(path, *, group: str | None = None, load: bool = False):
     ------
     ValueError
         For a path that is not a granchain store (it says what to give instead), a store whose
-        metadata cannot be read (``granchain info PATH`` says what is damaged), or another group.
+        metadata cannot be read (``granchain info PATH`` says what is damaged), a store that does not
+        match its checksums (``StoreDamagedError``), or another group.
     """
     import xarray as xr
 
+    if not isinstance(verify, (bool, np.bool_)):
+        raise ValueError(f"verify must be True (check the store against its checksums) or False (read it anyway, "
+                         f"with a warning), got {verify!r}")
+    if not isinstance(load, (bool, np.bool_)):
+        raise ValueError(f"load must be True (read every value into memory) or False (lazy), got {load!r}")
     if group not in (None, "progress"):
         raise ValueError(f"group must be None (the results) or 'progress' (the per-chunk sums and done flags), got {group!r}")
     try:
@@ -107,6 +125,8 @@ def open_store(path, *, group: str | None = None, load: bool = False):
         params = ds.attrs.get("granchain_parameters", params)
         if not isinstance(params, str):
             raise ValueError(f"{text} is not a granchain ensemble store (no granchain_parameters attribute): {_WHAT_TO_GIVE}")
+        if os.path.isdir(text):
+            ds = _checked(ds, text, group, load) if verify else _unchecked(ds, text)
         if load:
             try:
                 ds.load()
@@ -119,6 +139,101 @@ def open_store(path, *, group: str | None = None, load: bool = False):
     if load:
         ds.close()  # the values are in memory: no file stays open
     return result
+
+
+def _unchecked(ds, path: str):
+    import warnings
+
+    from .verify import StoreVerificationWarning
+
+    warnings.warn(f"{path} is read without verifying it (verify=False): damaged or misplaced values are not found; "
+                  f"`granchain info {path}` checks it", StoreVerificationWarning, stacklevel=4)
+    return ds
+
+
+def _checked(ds, path: str, group, load: bool):
+    """``ds`` (just opened) with every checksummed variable read through the store's check
+    (:class:`~granchain.ensembles.verify.StoreCheck`): at once with ``load``, chunk by chunk as Dask asks
+    otherwise; the records, the listing of data files and the averaged variables are checked at once."""
+    from .verify import StoreCheck, StoreDamagedError, Verification, _undecodable, what_to_do
+
+    try:
+        check = StoreCheck(path)
+    except Exception as exc:  # noqa: BLE001 -- records the opener read but the check cannot
+        raise StoreDamagedError(f"{path}: its checksum records cannot be read ({_short(exc)}); {what_to_do(path)}") from None
+    progress = group == "progress"
+    names = [n for n in check.names if n.startswith("progress/") == progress]
+    found = Verification(path, check.scheme, check.complete, check.missing_files(names), list(check.problems))
+    if group is None:
+        averaged = {}
+        # the averaged variables (no realization dim): small, read and checked at once
+        for name in [n for n in ds.data_vars if "realization" not in ds[n].dims] if check.scheme else []:
+            try:
+                arr = check.group[name]
+                averaged[name] = arr[...]
+            except Exception as exc:  # noqa: BLE001 -- a truncated or garbled file
+                found.problems.append(f"has an unreadable averaged variable {name} ({_undecodable(exc)})")
+                continue
+            why = check.averaged_problem(name, averaged[name], arr.dtype)
+            if why:
+                found.problems.append(why)
+    if not found.ok:
+        raise found.error()
+    # The variables' data replaced in place (dims, attributes and encoding kept; no re-alignment of the Dataset).
+    local = {name: name.split("/", 1)[1] if progress else name for name in names}
+    names = [name for name in names if local[name] in ds.variables]
+    values = check.read_variables(names) if load else {}
+    for name in names:
+        ds.variables[local[name]].data = values[name] if load else _lazy(check, name, ds[local[name]])
+    for name, data in (averaged.items() if group is None else ()):
+        ds.variables[name].data = data if load else _dask(data, ds[name])
+    return ds
+
+
+def _dask(values, var):
+    import dask.array as da
+
+    return da.from_array(values, chunks=var.chunks or values.shape, name=False)
+
+
+def _lazy(check, name: str, var):
+    """A Dask array reading ``name`` chunk by chunk through ``check`` (each chunk verified when read)."""
+    import dask.array as da
+
+    source = _VerifiedChunks(check, name)
+    chunks = var.chunks or tuple((s,) for s in source.shape)
+    return da.from_array(source, chunks=chunks, name=False, lock=False, fancy=False,
+                         meta=np.empty((0,) * source.ndim, dtype=source.dtype))
+
+
+class _VerifiedChunks:
+    """An array-like over one checksummed variable: indexing it reads the whole run chunks it touches, each
+    verified (:meth:`StoreCheck.read_chunk`), and returns the part asked for."""
+
+    def __init__(self, check, name: str):
+        arr, dims, self.axis, self.step = check._layout(name)
+        self.check, self.name = check, name
+        self.shape, self.dtype, self.ndim = tuple(arr.shape), arr.dtype, arr.ndim
+
+    def __getitem__(self, key):
+        key = key if isinstance(key, tuple) else (key,)
+        if any(k is Ellipsis for k in key):
+            i = next(i for i, k in enumerate(key) if k is Ellipsis)
+            key = key[:i] + (slice(None),) * (self.ndim - len(key) + 1) + key[i + 1:]
+        key = key + (slice(None),) * (self.ndim - len(key))
+        n, r = self.shape[self.axis], key[self.axis]
+        index = np.arange(n)[r]
+        if np.size(index) == 0:
+            return self.check.group[self.name][key]
+        lo, hi = int(np.min(index)) // self.step, int(np.max(index)) // self.step
+        block = np.concatenate([self.check.read_chunk(self.name, j) for j in range(lo, hi + 1)], axis=self.axis)
+        start = lo * self.step
+        if isinstance(r, slice):
+            a, b, step = r.indices(n)
+            local = slice(a - start, b - start if b - start >= 0 else None, step)
+        else:
+            local = index - start
+        return block[key[:self.axis] + (local,) + key[self.axis + 1:]]
 
 
 def _unreadable(path: str, exc: BaseException) -> str:

@@ -29,7 +29,7 @@ from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrat
 from ..solve.simulation import linear_crossing_time, time_limit
 from . import pulse_window as _window
 from .pulse_window import AUTO, FULL
-from .store import WALL, MemorySink, Variable, ZarrSink
+from .store import WALL, MemorySink, Variable, ZarrSink, _check_out, check_same_family
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL",
            "DAMPED_RTOL", "DAMPED_ATOL", "ensemble_integrator"]
@@ -590,7 +590,11 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     if n_large is not None:
         family = n_large
     fam = _family_of(family, distribution, n, momentum_conserving)
+    if out is not None:
+        out = _check_out(out, create=False)  # a path that can be a store, or what to change (nothing made yet)
     continuing = out is not None and resume is True
+    if continuing:  # other contact settings are named before the store's integrators (for its own law) are taken
+        check_same_family(out, fam)
     if pulse_window is None:  # a store is continued as it was started; a new run gets the windows
         pulse_window = _window.stored_setting(out) if continuing else AUTO
     if integrator is None and rtol is None and atol is None and continuing:

@@ -79,10 +79,10 @@ FORCES = (
              "time of the maximum force of contact q (the compression maximum)"),
 )
 
-#: Families with a rigid wall at the far end (``wall=True``): the wall contact's peak force.
+#: Families with a fixed wall at the far end (``wall=True``): the wall contact's peak force.
 WALL = (
     Variable("peak_wall_force", ("chain", "realization"), "float64", np.nan, UNITS_F,
-             "maximum force on the rigid wall at the far end of the chain"),
+             "maximum force on the fixed wall at the far end of the chain"),
     Variable("peak_wall_force_time", ("chain", "realization"), "float64", np.nan, UNITS_T,
              "time of the maximum force on the wall"),
 )
@@ -149,7 +149,11 @@ PROGRESS = (
              "sum over the chunk's successful realisations of round(v^2 * 2^bits)"),
     Variable("n_valid", ("chunk", "chain"), "int64", 0, "1", "successful realisations of the chunk"),
     Variable("checksum", ("chunk", "checked"), "int64", 0, "1",
-             "BLAKE2b-64 of the chunk's stored values, per checked variable (written before done)"),
+             "BLAKE2b-64 of the chunk's stored values, per checked variable (written before done)",
+             {"checksum_scheme": 2,
+              "comment": "keyed by the store's parameter record (all but realizations), the variable's name and the "
+                         "chunk index, so a chunk copied from another store or another place does not match "
+                         "(granchain.ensembles.verify); stores without checksum_scheme hash the values alone"}),
     Variable("done", ("chunk",), "int8", 0, "1", "1 once every result of the chunk and its checksums are on disk"),
 )
 
@@ -218,7 +222,16 @@ def checked_variables(spec) -> list[str]:
     return [v.name for v in per_realisation_variables(spec.family)] + [f"progress/{name}" for name in progress_sums(spec)]
 
 
-def digest(values, dtype) -> int:
-    """BLAKE2b-64 (as a signed int64) of the values as stored (dtype, C order)."""
+def digest(values, dtype, key: bytes | None = None, label: str = "") -> int:
+    """BLAKE2b-64 (as a signed int64) of the values as stored (dtype, C order).
+
+    ``key`` (the store's identity, :func:`granchain.ensembles.verify.store_identity`) and ``label`` (the
+    variable and the chunk index) bind the digest to where the values belong: the same values in another
+    store, or in another chunk, have another digest. Without them, the values alone (the checksums of
+    stores written before ``checksum_scheme`` 2)."""
     a = np.ascontiguousarray(values, dtype=np.dtype(dtype))
-    return int.from_bytes(hashlib.blake2b(a.tobytes(), digest_size=8).digest(), "little", signed=True)
+    h = hashlib.blake2b(digest_size=8, key=key or b"")
+    if key is not None:
+        h.update(label.encode() + b"\0")
+    h.update(memoryview(a).cast("B") if a.size else b"")
+    return int.from_bytes(h.digest(), "little", signed=True)

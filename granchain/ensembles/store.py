@@ -38,17 +38,19 @@ from .schema import (  # the schema's names, as before it had a module of its ow
     result_variables,
     sizes,
 )
+from . import verify as _verify
 
 __all__ = ["MemorySink", "ZarrSink", "StoreRepairWarning", "stored_record", "current_record", "check_same_parameters",
+           "check_same_family",
            "integrators_as_run", "ALIGNED", "AVERAGED", "FORCES", "PROGRESS", "PROGRESS_ALIGNED", "PROGRESS_SUMS", "RESULTS", "WALL", "Variable", "averaged_variables", "checked_variables", "chunk_variables", "digest", "parameter_variables", "per_realisation_variables", "progress_sum_variables", "progress_sums", "progress_variables", "result_variables", "sizes"]
 
 def integrators_as_run(spec) -> dict:
     """{chain kind: the record of its integrator as it runs on the family's chains}
     (``granchain.backends.integrator_as_run``): derived from the parameters, so not compared on resume."""
     from ..backends import integrator_as_run
-    from ..model.contacts import FreeEnd, LoadedEnd, RigidWall
+    from ..model.contacts import FreeEnd, LoadedEnd, FixedWall
 
-    boundary = RigidWall if spec.family.wall else (LoadedEnd if spec.family.static_force > 0 else FreeEnd)
+    boundary = FixedWall if spec.family.wall else (LoadedEnd if spec.family.static_force > 0 else FreeEnd)
     return {kind: integrator_as_run(integ, boundary) for kind, integ in spec.chain_integrators.items()}
 
 
@@ -263,7 +265,7 @@ def stored_parameters(path) -> str | None:
 def writable_array(path, name: str):
     """The existing Zarr array ``name`` of the store at ``path``, open for writing, that writes every
     chunk it is given, even one equal to the fill value (a missing data file means damage:
-    :func:`check_chunk`). ``zarr.open`` honours ``config`` for an existing array; ``zarr.open_array``
+    :mod:`~granchain.ensembles.verify`). ``zarr.open`` honours ``config`` for an existing array; ``zarr.open_array``
     (zarr 3.1) silently drops it, and a chunk of all zeros (status, done) was then deleted, not written."""
     import zarr
 
@@ -304,10 +306,19 @@ def _reference_metadata(spec) -> tuple[dict, set]:
     progress, encoding = progress_dataset(spec)
     progress.to_zarr(store, group="progress", mode="a", encoding=encoding, consolidated=False, **_fmt2())
     coords = set(ds.coords) | {f"progress/{c}" for c in progress.coords}
-    return {k: (v.to_bytes() if hasattr(v, "to_bytes") else bytes(v)) for k, v in mapping.items()}, coords
+    docs = {k: (v.to_bytes() if hasattr(v, "to_bytes") else bytes(v)) for k, v in mapping.items()}
+    docs["progress/.zattrs"] = _sealed(docs[".zattrs"], docs["progress/.zattrs"])
+    return docs, coords
 
 
-_VOLATILE_ATTRS = ("created", "history")  # kept from the store when root attributes are restored
+def _sealed(root: bytes, progress: bytes) -> bytes:
+    """The progress group's attributes (JSON) with the digest of the root attributes (JSON, as stored) added."""
+    doc = json.loads(progress)
+    doc[_verify.ATTRIBUTES_DIGEST] = _verify.attributes_digest(json.loads(root))
+    return json.dumps(doc, indent=4, sort_keys=True).encode()
+
+
+_VOLATILE_ATTRS = _verify.VOLATILE  # kept from the store when root attributes are restored
 
 
 class ZarrSink:
@@ -328,6 +339,8 @@ class ZarrSink:
         self.spec, self.path = spec, _check_out(path)
         self.log = log or (lambda message: None)
         self._arrays = {}  # Zarr arrays opened by write(), by name
+        # the key of this store's checksums: its parameter record less the realisations (granchain.ensembles.verify)
+        self.identity = _verify.store_identity(json.dumps(spec.describe(), sort_keys=True))
         self.lock = StoreLock(self.path)
         self.lock.acquire()
         try:
@@ -357,6 +370,9 @@ class ZarrSink:
         progress, encoding = progress_dataset(self.spec)
         progress.to_zarr(tmp, group="progress", mode="a", encoding=encoding, consolidated=False, **_fmt2())
         self._write_fill(tmp, slice(0, self.spec.realizations))
+        attrs = os.path.join(tmp, "progress", ".zattrs")
+        with open(os.path.join(tmp, ".zattrs"), "rb") as root, open(attrs, "rb") as progress:
+            _atomic_write(attrs, _sealed(root.read(), progress.read()))
         zarr.consolidate_metadata(tmp, zarr_format=2)
         os.rename(tmp, self.path)  # atomic: the store is absent or complete
 
@@ -392,8 +408,10 @@ class ZarrSink:
                 f"{path} holds {old_realizations} realisations summed with {old.fixed_point_bits} fixed-point bits; "
                 f"{self.spec.realizations} realisations need {self.spec.fixed_point_bits} bits (more than 2^20 realisations), "
                 "so they cannot extend it bitwise: start a new store for this run")
+        # checksums of the values alone (before checksum_scheme 2): accepted once, and re-keyed by _verify
+        unbound = (_read_json(os.path.join(path, "progress", "checksum", ".zattrs")) or {}).get("checksum_scheme") is None
         self._repair_metadata(old, warn=True)
-        bad = self._verify(old)
+        bad = self._verify(old, accept_unbound=unbound)
         if bad:
             self._mark_undone(bad)
         if old_realizations < self.spec.realizations:
@@ -418,6 +436,8 @@ class ZarrSink:
             for k in _VOLATILE_ATTRS:
                 if k in keep and k in want:
                     want[k] = keep[k]
+            if key == "progress/.zattrs" and warn and _verify.AVERAGED_DIGESTS in keep:
+                want[_verify.AVERAGED_DIGESTS] = keep[_verify.AVERAGED_DIGESTS]  # until finalize writes them anew
             if key in (".zattrs", "progress/.zattrs") and not warn and "history" in want:
                 want["history"] = (keep.get("history", want["history"]) + "\n" +
                                    f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} extended to "
@@ -449,20 +469,45 @@ class ZarrSink:
                     self._warn(f"coordinate {os.path.join(self.path, name)} was missing or damaged; restored it")
                 disk[name][...] = want
 
-    def _verify(self, spec) -> list[int]:
-        """Done chunks whose stored values do not match their checksums (with the reason reported)."""
+    def _verify(self, spec, accept_unbound: bool = False) -> list[int]:
+        """Done chunks whose stored values do not match their checksums (with the reason reported): the check
+        every reader makes (:class:`granchain.ensembles.verify.StoreCheck`). With ``accept_unbound`` (a store
+        written before checksum_scheme 2), checksums of the values alone are accepted, and re-keyed."""
         import zarr
 
         group = zarr.open_group(self.path, mode="r", zarr_format=2, use_consolidated=False)
-        names = checked_variables(spec)
         done, bad = self._done_flags(group, spec)
-        for j in np.flatnonzero(done == 1):
-            reason = self._check_chunk(group, spec, int(j), names)
-            if reason:
-                bad.append(int(j))
-                sl = spec.chunk_slice(int(j))
-                self._warn(f"{self.path}: chunk {j} (realisations {sl.start}-{sl.stop - 1}) {reason}; recomputing it")
-        return bad
+        check = _verify.StoreCheck(self.path, accept_unbound=accept_unbound)
+        check.done = done  # read flag by flag: an unreadable one (warned about) counts as not done
+        if check.sums is None and (check.done == 1).any():  # an unreadable checksum record: every done chunk redone
+            damaged = {int(j): "has an unreadable checksum record (progress/checksum)" for j in np.flatnonzero(check.done == 1)}
+        else:
+            damaged, values = {}, {}
+            for name in check.names:
+                try:
+                    values[name] = check.read_variable(name, damaged)
+                except Exception as exc:  # noqa: BLE001 -- unreadable metadata: every done chunk of it is redone
+                    for j in np.flatnonzero(check.done == 1):
+                        damaged.setdefault(int(j), f"has unreadable metadata for {name} ({_short(exc)})")
+            self._rekey(check, sorted(check.unbound - set(damaged)), values)
+        for j, reason in sorted(damaged.items()):
+            sl = spec.chunk_slice(j)
+            self._warn(f"{self.path}: chunk {j} (realisations {sl.start}-{sl.stop - 1}) {reason}; recomputing it")
+        return sorted(set(bad) | set(damaged))
+
+    def _rekey(self, check, chunks, values) -> None:
+        """Rewrite the checksums of ``chunks`` (verified against checksums of their values alone, as stores
+        written before checksum_scheme 2 hold them) keyed by this store's identity, variable and chunk."""
+        if not chunks or any(values.get(name) is None for name in check.names):
+            return  # (a variable that could not be read whole: re-keyed by the next resume)
+        arr = writable_array(self.path, "progress/checksum")
+        for j in chunks:
+            row = []
+            for name in check.names:
+                a, dims, axis, step = check._layout(name)
+                part = values[name][check._region(a, dims, axis, step, j)]
+                row.append(digest(part, a.dtype, self.identity, _verify.chunk_label(name, j)))
+            arr[j:j + 1] = np.array([row], dtype=np.int64)
 
     def _done_flags(self, group, spec, warn: bool = True):
         done, unreadable = np.zeros(spec.n_chunks, dtype=np.int8), []
@@ -475,9 +520,6 @@ class ZarrSink:
                     self._warn(f"{self.path}: the done flag {os.path.join(self.path, 'progress', 'done', str(j))} is "
                                f"unreadable; chunk {j} will be recomputed")
         return done, unreadable
-
-    def _check_chunk(self, group, spec, j: int, names) -> str | None:
-        return check_chunk(self.path, group, j, names, spec.chunk_slice(j))
 
     def _mark_undone(self, chunks):
         done = writable_array(self.path, "progress/done")
@@ -529,7 +571,7 @@ class ZarrSink:
 
     def _array(self, name: str):
         """The store's Zarr array ``name`` (``progress/...`` for the progress group), opened once per run.
-        Chunks equal to the fill value are written too: a missing data file means damage (check_chunk)."""
+        Chunks equal to the fill value are written too: a missing data file means damage (verify.StoreCheck)."""
         if name not in self._arrays:
             self._arrays[name] = writable_array(self.path, name)
         return self._arrays[name]
@@ -549,7 +591,8 @@ class ZarrSink:
         table = {v.name: v for v in progress_variables(spec)}
         for name in sums:
             values[f"progress/{name}"] = np.asarray(res[name], dtype=table[name].dtype)[None]
-        check = np.array([[digest(values[name], values[name].dtype) for name in checked_variables(spec)]], dtype=np.int64)
+        check = np.array([[digest(values[name], values[name].dtype, self.identity, _verify.chunk_label(name, j))
+                           for name in checked_variables(spec)]], dtype=np.int64)
         here = slice(j, j + 1)
         writes = [(self._array(v.name), _region(v.dims, "realization", sl), values[v.name]) for v in variables]
         writes += [(self._array(f"progress/{name}"), _region(table[name].dims, "chunk", here), values[f"progress/{name}"])
@@ -576,8 +619,13 @@ class ZarrSink:
             region = {"chain": slice(None), "granule": slice(None), "time": slice(None)}
             if self.spec.lags is not None:
                 region["lag"] = slice(None)
-            ds[[v.name for v in averaged_variables(self.spec)]].to_zarr(self.path, region=region, mode="r+",
-                                                                         consolidated=False, **_fmt2())
+            names = [v.name for v in averaged_variables(self.spec)]
+            ds[names].to_zarr(self.path, region=region, mode="r+", consolidated=False, **_fmt2())
+            # their checksums after them: a run stopped in between leaves a store the readers refuse and a resume repairs
+            attrs = os.path.join(self.path, "progress", ".zattrs")
+            doc = _read_json(attrs) or {}
+            doc[_verify.AVERAGED_DIGESTS] = _verify.averaged_digests(self.identity, self.spec.realizations, ds, names)
+            _atomic_write(attrs, json.dumps(doc, indent=4, sort_keys=True).encode())
             zarr.consolidate_metadata(self.path, zarr_format=2)
             return ds
         finally:
@@ -585,58 +633,6 @@ class ZarrSink:
 
     def close(self):
         self.lock.release()
-
-
-def check_chunk(path, group, j: int, names, sl: slice) -> str | None:
-    """Why chunk j (realisations ``sl``) of the store does not match its checksums, or None if it does.
-    Reads only the store (dims and dtypes from its metadata), so ``granchain info`` can use it too."""
-    try:
-        sums = group["progress/checksum"][j]
-    except Exception as exc:  # noqa: BLE001
-        return f"has an unreadable checksum record (progress/checksum/{j}.0: {_short(exc)})"
-    for k, name in enumerate(names):
-        axis, region_slice = ("chunk", slice(j, j + 1)) if name.startswith("progress/") else ("realization", sl)
-        try:
-            arr = group[name]
-            dims = arr.metadata.attributes["_ARRAY_DIMENSIONS"]
-        except Exception as exc:  # noqa: BLE001
-            return f"has unreadable metadata for {name} ({_short(exc)})"
-        key = f"{name}/" + ".".join(str(j) if d == axis else "0" for d in dims)
-        if not os.path.exists(os.path.join(path, *key.split("/"))):  # every chunk is written explicitly
-            return f"has a missing data file {key}"
-        try:
-            values = arr[_region(dims, axis, region_slice)]
-        except Exception as exc:  # noqa: BLE001 -- truncated or garbled chunk
-            return f"has an unreadable data file {key} ({_short(exc)})"
-        if digest(values, arr.dtype) != int(sums[k]):
-            return (f"does not match its checksum: the data file {key} or the checksum record "
-                    f"progress/checksum/{j}.0 has changed")
-    return None
-
-
-def verify_chunks(path, realizations: int, chunk_size: int) -> tuple:
-    """(done flags, {chunk: why it does not match its checksums}) of the store at ``path``, read without
-    changing it (``granchain info``); the checked variables are the store's own list (progress/checked).
-    None instead of the dict for a store that holds no checksums (written by granchain 0.1.0)."""
-    import zarr
-
-    group = zarr.open_group(path, mode="r", zarr_format=2, use_consolidated=False)
-    n_chunks = -(-realizations // chunk_size)
-    try:
-        done = np.asarray(group["progress/done"][...])
-    except Exception:  # noqa: BLE001 -- unreadable flags: no chunk counts as done
-        done = np.zeros(n_chunks, dtype=np.int8)
-    try:
-        names = [str(x) for x in group["progress/checked"][...]]
-    except KeyError:  # granchain 0.1.0 stored no checksums: nothing to verify
-        return done, None
-    damaged = {}
-    for j in np.flatnonzero(done == 1):
-        sl = slice(int(j) * chunk_size, min((int(j) + 1) * chunk_size, realizations))
-        reason = check_chunk(path, group, int(j), names, sl)
-        if reason:
-            damaged[int(j)] = reason
-    return done, damaged
 
 
 def _buf(raw: bytes):
@@ -659,8 +655,10 @@ def _atomic_write(file: str, data: bytes) -> None:
     os.replace(tmp, file)
 
 
-def _check_out(path) -> str:
-    """The store path as a string, refusing what can never be a store (with what to change)."""
+def _check_out(path, create: bool = True) -> str:
+    """The store path as a string, refusing what can never be a store (with what to change). ``create``:
+    make its folder; without, only check that it can be made (a run's arguments, before anything is
+    computed or written)."""
     try:
         text = os.fspath(path)
     except TypeError:
@@ -672,6 +670,15 @@ def _check_out(path) -> str:
     parent = os.path.dirname(os.path.abspath(text)) or "."
     if os.path.lexists(text) and not os.path.isdir(text):
         raise ValueError(f"out = {text} is an existing file, not a Zarr store (a directory): choose another path")
+    if not create:
+        existing = parent
+        while not os.path.exists(existing) and os.path.dirname(existing) != existing:
+            existing = os.path.dirname(existing)
+        if not os.path.isdir(existing):
+            raise ValueError(f"out = {text}: cannot create its folder {parent} ({existing} is a file); choose a writable path")
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise ValueError(f"out = {text}: its folder {existing} is not writable; choose a writable path")
+        return text
     try:
         os.makedirs(parent, exist_ok=True)
     except OSError as exc:
@@ -760,9 +767,7 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
     if extend and isinstance(stored_r, int) and stored_r <= new["realizations"]:
         old = {**old, "realizations": new["realizations"]}
     if old != new:
-        flat_old, flat_new = _flatten(old), _flatten(new)
-        diff = ", ".join(f"{k}: stored {flat_old.get(k)!r}, asked {flat_new.get(k)!r}"
-                         for k in sorted(set(flat_old) | set(flat_new)) if flat_old.get(k) != flat_new.get(k))
+        diff, what = _differences(old, new)
         hint = " (a store can be extended to more realisations, never shrunk)" if old.get("realizations") != new["realizations"] else ""
         if old.get("pulse_window") != new.get("pulse_window") and "pulse_window" not in old:
             hint += (" (a store written before granchain 0.5 with a trailing window, whose granules behind it report the "
@@ -775,9 +780,44 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
                      "granchain.DP5.relaxed(5e-8, 5e-11)}, on the command line --integrator dp5; one written with "
                      "granchain 0.4's defaults with integrator={'decorated': granchain.RKN4.relaxed(1e-5, 1e-8), "
                      "'effective': granchain.DP5.relaxed(5e-8, 5e-11)})")
-        raise ValueError(f"{path} was written with different parameters ({diff}){hint}; "
+        raise ValueError(f"{path} was written with {what} ({diff}){hint}; "
                          "results are never mixed: use another path, or the stored parameters to resume")
     return int(stored_r)
+
+
+#: The family fields that are its contacts (the law, its exponent, the static load, the striker, the wall).
+_CONTACT_FIELDS = ("contact", "contact_model", "static_force", "striker_mass", "wall", "n")
+
+
+def _differences(old: dict, new: dict, prefix: str = "") -> tuple[str, str]:
+    """("name: stored x, asked y, ...", "different contact settings" / "different parameters") of two records."""
+    flat_old, flat_new = _flatten(old, prefix), _flatten(new, prefix)
+    keys = [k for k in sorted(set(flat_old) | set(flat_new)) if flat_old.get(k) != flat_new.get(k)]
+    diff = ", ".join(f"{k}: stored {flat_old.get(k)!r}, asked {flat_new.get(k)!r}" for k in keys)
+    contact = [k for k in keys if k.startswith("family.") and k.split(".")[1] in _CONTACT_FIELDS]
+    if contact:
+        return diff, "different contact settings" + (" and parameters" if len(contact) < len(keys) else "")
+    return diff, "different parameters"
+
+
+def check_same_family(path, family) -> None:
+    """Refuse to continue a store written for another family (other contact settings: law, damping, static
+    load, striker, wall), naming what differs, before anything else is taken from the store (its
+    integrators, which suit its own contact law). Nothing happens where ``path`` holds no readable record
+    (a new store; :func:`check_same_parameters` judges the rest)."""
+    try:
+        stored = stored_parameters(path) if os.path.isdir(path) else None
+        old = current_record(json.loads(stored)).get("family") if stored is not None else None
+    except (TypeError, ValueError, OSError):
+        return
+    if not isinstance(old, dict):
+        return
+    old = {"family": json.loads(json.dumps(old, sort_keys=True))}
+    new = {"family": json.loads(json.dumps(family.describe(), sort_keys=True))}
+    if old != new:
+        diff, what = _differences(old, new)
+        raise ValueError(f"{path} was written with {what} ({diff}); results are never mixed: use another path, or "
+                         "the stored settings to resume (`granchain info STORE` shows them)")
 
 
 def stored_record(ds, key: str = "family") -> dict | None:

@@ -18,7 +18,7 @@ size. A family says
 Families: :class:`RandomDecorated` (the paper's chain), :class:`TaperedDecorated`,
 :class:`RandomRadii` (polydisperse), :class:`BinaryRandom` (two species) and
 :class:`CustomFamily` (a user's function). Every family but the custom one takes
-``wall=True``: its chains then end in a rigid wall (a last granule of infinite mass,
+``wall=True``: its chains then end in a fixed wall (a last granule of infinite mass,
 :meth:`granchain.Chain.with_wall`), how protectors are tested; the free end is the
 default. Every family but the custom one also takes the real contacts of
 ``granchain.model.contacts``: ``contact=granchain.Viscoelastic(gamma)`` (dissipation),
@@ -116,7 +116,7 @@ class ChainBatch(NamedTuple):
 
 
 def _add_wall(batch: ChainBatch, last_radius) -> ChainBatch:
-    """The batch with a rigid wall after its last granule: mass inf, stiffness sqrt(2 R_M)
+    """The batch with a fixed wall after its last granule: mass inf, stiffness sqrt(2 R_M)
     (:func:`granchain.wall_stiffness`, the limit of Eq. r-prime), the expressions of
     :meth:`granchain.Chain.with_wall`, so that rows stay bitwise the single chains."""
     R = batch.masses.shape[0]
@@ -212,7 +212,7 @@ class ChainFamily:
     def _model_label(self) -> str:
         parts = []
         if self.contact is not None:
-            parts.append(f"viscoelastic gamma = {self.contact.gamma:.4g}")
+            parts.append(f"viscoelastic gamma = {self.contact.gamma:.4g}{'' if self.contact.clamp else ' (unclamped)'}")
         if self.static_force > 0:
             parts.append(f"precompressed F0 = {self.static_force:.4g}")
         if self.striker_mass is not None:
@@ -267,7 +267,7 @@ class ChainFamily:
         return {**record, "wall": True} if self.wall else record
 
     def _wall_label(self) -> str:
-        return ", against a rigid wall" if self.wall else ""
+        return ", against a fixed wall" if self.wall else ""
 
     def parameters(self) -> tuple:
         """The :class:`granchain.families.RandomParameter` records of what :meth:`draw` returns."""
@@ -938,7 +938,8 @@ def _model_of_record(record: dict) -> dict:
     if law is not None:
         if law.get("law") != "viscoelastic":
             raise ValueError(f"unknown contact law in the stored record: {law!r}")
-        out["contact"] = Viscoelastic(law["gamma"], law["n"])
+        # records written before the clamp option hold no "clamp": they were all clamped (the default)
+        out["contact"] = Viscoelastic(law["gamma"], law["n"], clamp=law.get("clamp", True))
     if record.get("static_force"):
         out["static_force"] = float(record["static_force"])
     if record.get("striker_mass") is not None:

@@ -2,7 +2,7 @@
 
 - :mod:`~granchain.model.contacts`: the contact law (:class:`PowerLaw`, paper Eq. hertz-1, and the
   dissipative :class:`Viscoelastic`), the static load (:class:`Precompression`), the far boundary
-  (:class:`FreeEnd`, :class:`LoadedEnd`, :class:`RigidWall`) and the initial state (:class:`Impulse`,
+  (:class:`FreeEnd`, :class:`LoadedEnd`, :class:`FixedWall`) and the initial state (:class:`Impulse`,
   :class:`Striker`), small frozen values that declare the assumptions they license (forces depend on
   positions only, the granules ahead of the pulse are exactly at rest, the pulse leaves for good);
 - :mod:`~granchain.model.collision`: the two-body collision of the viscoelastic law (its coefficient
@@ -17,6 +17,14 @@ Everything here is NumPy and SciPy (no compiled code): solving (:mod:`granchain.
 compiled code (:mod:`granchain.backends`) read these values, never the other way round.
 """
 
-from .contacts import FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, RigidWall, Striker, Viscoelastic
+from .contacts import FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker, Viscoelastic
 
-__all__ = ["PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "RigidWall", "Impulse", "Striker"]
+__all__ = ["PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker"]
+
+
+def __getattr__(name):
+    if name == "RigidWall":  # renamed FixedWall: "rigid" means an infinitely stiff wall material
+        from . import contacts
+
+        return contacts.__getattr__(name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -9,7 +9,7 @@ motion_rescaled). Everything the integrators need is in ``masses``,
 ``stiffness``, ``n`` and ``initial_velocity``; ``observed`` names the granules
 whose peak velocity and peak time are recorded.
 
-A rigid wall at the far end is the same representation: a last granule of
+A fixed wall at the far end is the same representation: a last granule of
 infinite radius and mass (``masses[-1] = inf``, inverse mass 0) whose contact
 stiffness is the limit of Eq. (r-prime) for R_{M} -> infinity, sqrt(2 R_{M-1})
 (:func:`wall_stiffness`). Build one with ``wall=True`` on the builders or
@@ -36,7 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import count, exponent, finite_scalar, positive_array
-from .contacts import FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, RigidWall, Striker, Viscoelastic
+from .contacts import (MIN_DYNAMIC_RATIO, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker,
+                       Viscoelastic)
 
 __all__ = [
     "Chain",
@@ -68,7 +69,7 @@ class Chain:
     Parameters
     ----------
     masses : (M,) array, M >= 2
-        Granule masses m_k > 0. The last may be ``numpy.inf``: a rigid wall (it never
+        Granule masses m_k > 0. The last may be ``numpy.inf``: a fixed wall (it never
         moves, is never observed, and takes the pulse's impulse; see :attr:`wall`).
     stiffness : (M-1,) array
         Contact prefactors c_k > 0: the force between k and k+1 is
@@ -102,7 +103,7 @@ class Chain:
         The contact law.
     precompression : granchain.model.contacts.Precompression
         The static load (force 0 without one).
-    boundary : FreeEnd, LoadedEnd or RigidWall (granchain.model.contacts)
+    boundary : FreeEnd, LoadedEnd or FixedWall (granchain.model.contacts)
         The far end: a wall when the last mass is infinite; held by the static force
         when the chain is precompressed without a wall; else free.
     initial : granchain.model.contacts.Impulse or granchain.model.contacts.Striker
@@ -122,7 +123,7 @@ class Chain:
     static_force: float = 0.0
     striker: bool = False
     precompression: Precompression = field(init=False, repr=False)
-    boundary: FreeEnd | LoadedEnd | RigidWall = field(init=False, repr=False)
+    boundary: FreeEnd | LoadedEnd | FixedWall = field(init=False, repr=False)
     initial: Impulse = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -132,9 +133,19 @@ class Chain:
             raise ValueError(
                 f"stiffness needs one entry per contact (len(masses) - 1 = {m.size - 1}), got {c.size}"
             )
+        _in_range("stiffness", c, STIFFNESS_RANGE, "contact prefactors (in units of the reference pair's)")
         n = exponent(self.n)
         v0 = finite_scalar("initial_velocity", self.initial_velocity, positive=True)
+        if not VELOCITY_RANGE[0] <= v0 <= VELOCITY_RANGE[1]:
+            raise ValueError(f"initial_velocity = {v0:g} is outside {VELOCITY_RANGE[0]:g}..{VELOCITY_RANGE[1]:g}: in rescaled units "
+                             "the units' impact speed is 1, and a speed that far from it puts the compressions and the "
+                             "collision times outside the range the integrators' tolerances are scaled for")
         wall = bool(np.isinf(m[-1]))
+        if isinstance(self.striker, Impulse):
+            raise ValueError("striker is a flag (whether granule 0 of the arrays is a striker), not a granchain.Striker: "
+                             "add a striker with chain.with_striker(mass=... or radius=..., velocity=...)")
+        if not isinstance(self.striker, (bool, np.bool_)):
+            raise ValueError(f"striker must be True or False (whether granule 0 of the arrays is a striker), got {self.striker!r}")
         striker = bool(self.striker)
         if striker and m.size - wall < 3:
             raise ValueError("a chain with a striker needs the striker and at least 2 granules")
@@ -144,6 +155,13 @@ class Chain:
         if contact.n != n:
             raise ValueError(f"the contact law's exponent n = {contact.n:g} differs from the chain's n = {n:g}: give the same n")
         load = self.static_force if isinstance(self.static_force, Precompression) else Precompression(self.static_force)
+        ratio = load.resolvable(float(m[0]), float(c[0]), n, v0)
+        if ratio < MIN_DYNAMIC_RATIO:
+            raise ValueError(
+                f"the static force F0 = {load.force:g} (rescaled) is too large for this chain: granule 1 struck at "
+                f"{v0:g} moves its contact by ~{ratio:.1e} of the static overlap, which double precision (2.2e-16) does "
+                f"not resolve to the accuracy of the peaks; the dynamic part must be >= {MIN_DYNAMIC_RATIO:g} of it, "
+                f"so give F0 <= {_largest_static_force(float(m[0]), float(c[0]), n, v0):.3g} (or strike harder)")
         if self.observed is None:
             obs = np.arange(int(striker), m.size - wall, dtype=np.int64)
         else:
@@ -172,7 +190,7 @@ class Chain:
         object.__setattr__(self, "striker", striker)
         object.__setattr__(self, "precompression", load)
         if wall:
-            boundary = RigidWall(float(c[-1]))
+            boundary = FixedWall(float(c[-1]))
         else:
             boundary = LoadedEnd(load.force) if load.force > 0 else FreeEnd()
         object.__setattr__(self, "boundary", boundary)
@@ -190,7 +208,7 @@ class Chain:
 
     @property
     def wall(self) -> bool:
-        """Whether the far end is a rigid wall (:attr:`boundary`; the last granule has infinite mass)."""
+        """Whether the far end is a fixed wall (:attr:`boundary`; the last granule has infinite mass)."""
         return self.boundary.wall
 
     @property
@@ -218,7 +236,19 @@ class Chain:
         return self.precompression.overlaps(self.stiffness, self.n)
 
     def replace(self, **changes) -> "Chain":
-        """The same chain with some constructor arguments changed (a copy of ``meta``)."""
+        """The same chain with some constructor arguments changed (a copy of ``meta``); every value goes
+        through the constructor's checks."""
+        allowed = ("masses", "stiffness", "n", "initial_velocity", "observed", "radii", "kind", "meta", "contact",
+                   "static_force", "striker")
+        unknown = sorted(set(changes) - set(allowed))
+        if unknown:
+            raise ValueError(f"Chain.replace() takes the constructor's arguments ({', '.join(allowed)}), not "
+                             f"{', '.join(unknown)}: the precompression, boundary and initial state follow from them "
+                             "(with_precompression, with_wall, with_striker)")
+        flag = changes.get("striker", self.striker)
+        if isinstance(flag, (bool, np.bool_)) and bool(flag) != self.striker:
+            raise ValueError("replace(striker=...) would reinterpret granule 0 of the arrays (a granule would become a "
+                             "striker or a striker a granule); add a striker with chain.with_striker(mass=..., velocity=...)")
         args = dict(masses=self.masses, stiffness=self.stiffness, n=self.n, initial_velocity=self.initial_velocity,
                     observed=self.observed, radii=self.radii, kind=self.kind, meta=dict(self.meta),
                     contact=self.contact, static_force=self.static_force, striker=self.striker)
@@ -238,14 +268,17 @@ class Chain:
         return self.replace(static_force=Precompression(force))
 
     def with_dissipation(self, gamma: float | None = None, *, restitution: float | None = None,
-                         speed: float = 1.0) -> "Chain":
+                         speed: float = 1.0, clamp: bool = True) -> "Chain":
         """The same chain with viscoelastic contacts (:class:`granchain.model.contacts.Viscoelastic`):
         give the damping time ``gamma``, or a coefficient of ``restitution`` in (0, 1] of two reference
         granules colliding at ``speed`` (rescaled; 1 is the impact speed of the paper's units), from
-        which ``gamma`` is calibrated by solving the two-body problem."""
+        which ``gamma`` is calibrated by solving the two-body problem. ``clamp``: the force never pulls
+        (True, the default) or pulls at the end of a collision as in the published law whose restitution
+        tables the literature gives (False; :class:`granchain.model.contacts.Viscoelastic`)."""
         if (gamma is None) == (restitution is None):
             raise ValueError("give either gamma (the damping time) or restitution (a coefficient of restitution, with speed)")
-        law = Viscoelastic(gamma, self.n) if gamma is not None else Viscoelastic.from_restitution(restitution, speed, n=self.n)
+        law = (Viscoelastic(gamma, self.n, clamp) if gamma is not None
+               else Viscoelastic.from_restitution(restitution, speed, n=self.n, clamp=clamp))
         return self.replace(contact=law)
 
     def with_striker(self, mass: float | None = None, *, radius: float | None = None, velocity: float | None = None,
@@ -288,8 +321,9 @@ class Chain:
         meta = dict(self.meta)
         if mats:
             meta["materials"] = [smat] + list(mats)
-        return self.replace(masses=np.concatenate(([m_s], self.masses)), stiffness=np.concatenate(([c_s], self.stiffness)),
-                            initial_velocity=v, observed=self.observed + 1, radii=radii, meta=meta, striker=True)
+        return Chain(masses=np.concatenate(([m_s], self.masses)), stiffness=np.concatenate(([c_s], self.stiffness)),
+                     n=self.n, initial_velocity=v, observed=self.observed + 1, radii=radii, kind=self.kind, meta=meta,
+                     contact=self.contact, static_force=self.static_force, striker=True)
 
     @property
     def energy(self) -> float:
@@ -361,7 +395,7 @@ class Chain:
     def __repr__(self) -> str:
         extras = ""
         if self.contact.gamma > 0:
-            extras += f", viscoelastic gamma={self.contact.gamma:.6g}"
+            extras += f", viscoelastic gamma={self.contact.gamma:.6g}{'' if self.contact.clamp else ' (unclamped)'}"
         if self.static_force > 0:
             extras += f", static_force={self.static_force:.6g}"
         if self.striker:
@@ -372,7 +406,45 @@ class Chain:
         )
 
 
+#: The range of rescaled masses a chain takes (units of the reference granule's mass): a granule 1e-18
+#: times lighter (radius 1e-6) than the reference has contact times and compressions ~1e-6 of the
+#: others', which no step budget reaches and which sink toward the rounding of the positions.
+MASS_RANGE = (1e-18, 1e18)
+#: The range of radii (units of the reference radius): the cube roots of :data:`MASS_RANGE`.
+RADIUS_RANGE = (1e-6, 1e6)
+#: The range of contact prefactors (units of the reference pair's, sqrt(2 R R' / (R + R'))).
+STIFFNESS_RANGE = (1e-12, 1e12)
+#: The range of the struck granule's initial speed (units of the impact speed of the rescaling).
+VELOCITY_RANGE = (1e-8, 1e8)
+
+
+def _in_range(name: str, a: np.ndarray, bounds: tuple, what: str, why: str = "") -> None:
+    lo, hi = bounds
+    bad = (a < lo) | (a > hi)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{name}[{i}] = {float(a[i]):g} is outside {lo:g}..{hi:g} ({what}){why or ': double precision cannot integrate granules and contacts that far from the reference one (rescaled units, paper Sec. II)'}")
+
+
+def _largest_static_force(m: float, c: float, n: float, v: float) -> float:
+    """The F0 at which :meth:`Precompression.resolvable` equals MIN_DYNAMIC_RATIO: D / delta0 =
+    v sqrt(m / ((n-1) c)) delta0^(-n/2), solved for delta0 and F0 = c delta0^(n-1)."""
+    from .contacts import MIN_DYNAMIC_RATIO
+
+    d0 = (v * np.sqrt(m / ((n - 1.0) * c)) / MIN_DYNAMIC_RATIO) ** (2.0 / n)
+    return float(c * d0 ** (n - 1.0))
+
+
 def _masses_with_wall(masses) -> np.ndarray:
+    """Positive finite masses within :data:`MASS_RANGE`, except that the last may be +inf (a wall)."""
+    m = _masses_any(masses)
+    _in_range("masses", m[np.isfinite(m)], MASS_RANGE, "units of the reference granule's mass",
+              ": a granule that much lighter or heavier than the reference one has contact times and compressions "
+              "that double precision and any step budget cannot integrate beside it")
+    return m
+
+
+def _masses_any(masses) -> np.ndarray:
     """Positive finite masses, except that the last may be +inf (a wall)."""
     try:
         a = np.array(masses, dtype=float).reshape(-1) if np.ndim(masses) <= 1 else None
@@ -380,7 +452,7 @@ def _masses_with_wall(masses) -> np.ndarray:
         a = None
     if a is not None and a.size >= 2 and np.isinf(a[:-1]).any():
         i = int(np.flatnonzero(np.isinf(a[:-1]))[0])
-        raise ValueError(f"masses: entry {i} is infinite; only the last granule may be infinitely heavy (a rigid wall)")
+        raise ValueError(f"masses: entry {i} is infinite; only the last granule may be infinitely heavy (a fixed wall)")
     if a is not None and a.size >= 2 and a[-1] == np.inf:
         return np.append(positive_array("masses", a[:-1], min_size=1), np.inf)
     return positive_array("masses", masses, min_size=2)
@@ -395,8 +467,22 @@ def _radii_with_wall(radii, wall: bool) -> np.ndarray:
     return positive_array("radii", radii)
 
 
+def _check_radii(r: np.ndarray, name: str = "radii") -> None:
+    """Radii within :data:`RADIUS_RANGE` (units of the reference radius), checked before the masses R^3
+    they give, so that the message names the radius."""
+    lo, hi = RADIUS_RANGE
+    bad = (r < lo) | (r > hi)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        which = "small" if r[i] < lo else "large"
+        raise ValueError(f"{name}[{i}] = {float(r[i]):g} is too {which}: radii must lie in {lo:g}..{hi:g} (units of the "
+                         f"reference radius), because a sphere of radius R has mass R^3 and a mass ratio beyond "
+                         f"{MASS_RANGE[1]:g} gives contact times and compressions that double precision and any step "
+                         "budget cannot integrate beside the reference granule")
+
+
 def wall_stiffness(radius) -> np.ndarray:
-    """Contact prefactor of a sphere of radius R against a rigid wall: sqrt(2 R).
+    """Contact prefactor of a sphere of radius R against a fixed wall: sqrt(2 R).
 
     The limit of Eq. (r-prime), sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})), for R_{k+1} -> infinity
     (a flat wall of the same material). Works on arrays (a batch of last radii).
@@ -404,22 +490,33 @@ def wall_stiffness(radius) -> np.ndarray:
     return np.sqrt(2.0 * np.asarray(radius, dtype=float))  # Eq. (r-prime), R_{k+1} -> inf
 
 
-def _material(m):
+RIGID = "rigid"
+
+
+def _material(m, *, rigid: bool = False):
+    """The one lookup of a material: a :class:`granchain.units.Material` as it is, a preset name through
+    ``granchain.units.get_material`` (case-insensitive), and, where a wall's material is meant
+    (``rigid=True``), ``"rigid"`` in any case (an infinitely stiff wall: :data:`RIGID`)."""
     from ..units import Material, get_material
 
     if isinstance(m, Material):
         return m
     if isinstance(m, str):
+        if m.strip().lower() == RIGID:
+            if rigid:
+                return RIGID
+            raise ValueError(f"{m!r} is a wall's material only (an infinitely stiff wall): a granule or striker needs a "
+                             "granchain.units.Material or a preset name (steel, stainless-steel, brass, aluminium, glass, ptfe)")
         return get_material(m)
     raise ValueError(f"a material must be a granchain.units.Material or a preset name (steel, stainless-steel, brass, "
-                     f"aluminium, glass, ptfe), got {m!r}")
+                     f"aluminium, glass, ptfe{', or rigid for a wall' if rigid else ''}), got {m!r}")
 
 
 def _pair_modulus(a, b) -> float:
     """Hertz's effective modulus of two spheres (or a sphere and a flat) of materials a and b:
     1/E* = (1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b (K. L. Johnson, *Contact Mechanics*, Sec. 4.2); b may be
     ``"rigid"`` (E_b infinite)."""
-    if isinstance(b, str) and b == "rigid":
+    if isinstance(b, str) and b == RIGID:
         return a.E / (1.0 - a.nu**2)
     return 1.0 / ((1.0 - a.nu**2) / a.E + (1.0 - b.nu**2) / b.E)
 
@@ -447,7 +544,7 @@ def material_wall_stiffness(radius, material, wall_material, *, reference) -> fl
     limit R_wall -> infinity of :func:`material_stiffness` (:func:`wall_stiffness` when all are
     one material)."""
     a, ref = _material(material), _material(reference)
-    b = wall_material if (isinstance(wall_material, str) and wall_material == "rigid") else _material(wall_material)
+    b = _material(wall_material, rigid=True)
     ratio = 1.0 if (a == ref and b == ref) else _pair_modulus(a, b) / _pair_modulus(ref, ref)
     return float(ratio * wall_stiffness(radius))
 
@@ -484,6 +581,7 @@ def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observ
     r = positive_array("radii", radii, min_size=1)
     if r.size < 2:
         raise ValueError(f"a chain needs at least 2 granules, got {r.size} radius")
+    _check_radii(r)
     if materials is None:
         if wall_material is not None:
             raise ValueError("wall_material needs the granules' materials=... (the wall's stiffness is relative to theirs)")
@@ -504,7 +602,7 @@ def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observ
 
 
 def monodisperse(size: int, *, n: float = HERTZ, initial_velocity: float = 1.0, wall: bool = False) -> Chain:
-    """``size`` equal spheres of radius 1 (and a rigid wall after them with ``wall=True``)."""
+    """``size`` equal spheres of radius 1 (and a fixed wall after them with ``wall=True``)."""
     size = count("size", size, minimum=2)
     return from_radii(np.ones(size), n=n, initial_velocity=initial_velocity, kind="monodisperse", wall=wall)
 
@@ -544,7 +642,7 @@ def decorated(small_radii, *, large_radius=1.0, n: float = HERTZ, initial_veloci
     decorated chain, :class:`granchain.TaperedDecorated`). A small granule may not
     be larger than its smaller neighbour (use :func:`from_radii` for any other
     chain). The chain has 2N-1 granules, both ends large, and observes the large
-    granules (0-based indices 0, 2, ..., 2N-2). ``wall=True`` adds a rigid wall after
+    granules (0-based indices 0, 2, ..., 2N-2). ``wall=True`` adds a fixed wall after
     large granule N (granule 2N, never observed).
     """
     s = positive_array("small_radii", small_radii, min_size=1)

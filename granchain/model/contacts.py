@@ -11,7 +11,7 @@ sentinels:
   the energy it takes is integrated with the motion.
 - :class:`Precompression`: a static force F0 compresses the chain before it is struck; the chain
   starts in exact static equilibrium and the pulse rides on it.
-- :class:`FreeEnd`, :class:`LoadedEnd` and :class:`RigidWall`: whether the pulse leaves through the
+- :class:`FreeEnd`, :class:`LoadedEnd` and :class:`FixedWall`: whether the pulse leaves through the
   far end for good (``licenses_goal_control``: the granules behind the front will not see it again,
   so the relaxed zone and the trailing window of ``granchain.DP5`` are safe) and which rule ends the
   run (``has_exit``).
@@ -26,10 +26,22 @@ A :class:`granchain.Chain` holds these as ``chain.contact``, ``chain.precompress
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-__all__ = ["PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "RigidWall", "Impulse", "Striker"]
+__all__ = ["PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker",
+           "MAX_STATIC_FORCE", "MIN_DYNAMIC_RATIO"]
+
+#: The largest static force :class:`Precompression` takes (rescaled units, whatever the chain): a reference
+#: contact (prefactor 1, mass 1) struck at speed 1 under it has a dynamic compression 3e-13 of its static
+#: overlap, which double precision (eps = 2.2e-16) no longer resolves.
+MAX_STATIC_FORCE = 1e12
+
+#: The smallest ratio of the dynamic compression to the static overlap at the struck contact that a chain
+#: accepts (:meth:`Precompression.resolvable`): delta0 + D in double precision keeps D to 2.2e-16 / 1e-7
+#: = 2e-9 relative, well inside the accuracy contract (1e-6) of the peaks.
+MIN_DYNAMIC_RATIO = 1e-7
 
 
 @dataclass(frozen=True)
@@ -61,14 +73,22 @@ class PowerLaw:
 class Viscoelastic:
     """The viscoelastic Hertz contact: for compression delta > 0 closing at the rate d(delta)/dt,
 
-        F = c [delta^(n-1) + gamma delta^(n-2) d(delta)/dt],   clamped at F >= 0,
+        F = c [delta^(n-1) + gamma delta^(n-2) d(delta)/dt],   clamped at F >= 0 (``clamp=True``),
 
     and 0 for delta <= 0 (rescaled units; ``gamma`` is a time). For n = 5/2 this is the force of
     G. Kuwabara and K. Kono, Jpn. J. Appl. Phys. 26, 1230 (1987), derived from the viscoelastic
     continuum by N. V. Brilliantov, F. Spahn, J.-M. Hertzsch and T. Poschel, Phys. Rev. E 53, 5382
-    (1996), whose F = rho (xi^(3/2) + (3/2) A xi^(1/2) dxi/dt) is this law with gamma = 3 A / 2. The
-    clamp: a contact never pulls (while the spheres separate faster than the damping allows the force
-    is 0; T. Poschel and T. Schwager, *Computational Granular Dynamics*, Springer 2005, Sec. 2.3).
+    (1996), whose F = rho (xi^(3/2) + (3/2) A xi^(1/2) dxi/dt) is this law with gamma = 3 A / 2.
+
+    The clamp (``clamp=True``, the default): a contact never pulls; while the spheres separate faster
+    than the damping allows, the force is 0 (T. Poschel and T. Schwager, *Computational Granular
+    Dynamics*, Springer 2005, Sec. 2.3). The published coefficients of restitution of this law (1 - e =
+    1.7302 A rho^(2/5) g^(1/5) + ..., T. Schwager and T. Poschel, Phys. Rev. E 57, 650 (1998);
+    R. Ramirez, T. Poschel, N. V. Brilliantov and T. Schwager, Phys. Rev. E 60, 4465 (1999)) are for
+    the UNCLAMPED force, which pulls at the end of a collision and so gives a lower e: the clamped law's
+    e is higher (two unit spheres at unit speed: by 0.08 %, 0.4 % and 2.2 % at A = 0.05, 0.1 and 0.2,
+    gamma = 3 A / 2; ``tests/test_real_contacts.py``). ``clamp=False`` lets the force pull (it is still 0 for delta <= 0, where the
+    spheres have separated), as the published model does: it reproduces those tables.
 
     Not ``conservative`` (for gamma > 0): the force depends on velocities, so the methods for
     x'' = f(x) (RKN4, Verlet) refuse it; DP5 and DOP853 integrate it, and the energy the contacts
@@ -84,6 +104,7 @@ class Viscoelastic:
 
     gamma: float
     n: float = 2.5
+    clamp: bool = True
 
     tensionless: ClassVar[bool] = True
 
@@ -95,46 +116,55 @@ class Viscoelastic:
     def __post_init__(self):
         import math
 
-        try:
-            g = float(self.gamma)
-        except (TypeError, ValueError):
-            raise ValueError(f"gamma (the damping time of the viscoelastic contact) must be a number, got {self.gamma!r}") from None
+        import numpy as np
+
+        g = _real(self.gamma, "gamma (the damping time of the viscoelastic contact)")
         if not math.isfinite(g) or g < 0.0:
             raise ValueError(f"gamma (the damping time of the viscoelastic contact) must be finite and >= 0, got {self.gamma!r}; "
                              "gamma = 0 is the elastic contact")
-        n = float(self.n)
-        if not n >= 2.0:
-            raise ValueError(f"the viscoelastic contact needs an exponent n >= 2, got n = {self.n!r}: its damping term "
+        try:
+            n = float(self.n)
+        except (TypeError, ValueError):
+            raise ValueError(f"n (the exponent of the viscoelastic contact) must be a number, got {self.n!r}") from None
+        if not (math.isfinite(n) and n >= 2.0):
+            raise ValueError(f"the viscoelastic contact needs an exponent n >= 2 (finite), got n = {self.n!r}: its damping term "
                              "gamma delta^(n-2) d(delta)/dt would diverge as a contact closes")
+        if not isinstance(self.clamp, (bool, np.bool_)):
+            raise ValueError(f"clamp must be True (the force never pulls, the default) or False (the published, "
+                             f"unclamped law), got {self.clamp!r}")
         object.__setattr__(self, "gamma", g)
         object.__setattr__(self, "n", n)
+        object.__setattr__(self, "clamp", bool(self.clamp))
 
     @classmethod
     def from_restitution(cls, restitution: float, speed: float = 1.0, *, n: float = 2.5, mass: float = 1.0,
-                         stiffness: float = 1.0) -> "Viscoelastic":
+                         stiffness: float = 1.0, clamp: bool = True) -> "Viscoelastic":
         """The law whose two-sphere collision at impact speed ``speed`` has the coefficient of
         restitution ``restitution`` (in (0, 1]; 1 is elastic).
 
         The pair is two reference granules by default (masses ``mass`` = 1, contact prefactor
         ``stiffness`` = 1: two spheres of radius 1, Eq. r-prime); ``gamma`` solves
         e(gamma) = restitution, with e from the two-body problem integrated by SciPy's DOP853
-        (:func:`granchain.model.collision.restitution`)."""
+        (:func:`granchain.model.collision.restitution`) with the same ``clamp``: the clamped law needs a
+        little more damping than the published (unclamped) one for the same e."""
         from .collision import gamma_for_restitution
 
-        return cls(gamma_for_restitution(restitution, speed, n=n, mass=mass, stiffness=stiffness), n)
+        return cls(gamma_for_restitution(restitution, speed, n=n, mass=mass, stiffness=stiffness, clamp=clamp), n, clamp)
 
     def force(self, compression, stiffness, rate=0.0):
         """The force of the law (NumPy, any shape): c [d^(n-1) + gamma d^(n-2) rate] for d > 0,
-        clamped at 0; 0 for d <= 0."""
+        clamped at 0 unless ``clamp`` is False; 0 for d <= 0."""
         import numpy as np
 
         d = np.asarray(compression, dtype=float)
         dp = np.where(d > 0.0, d, 0.0)
         f = stiffness * dp ** (self.n - 2.0) * (dp + self.gamma * np.asarray(rate, dtype=float))
-        return np.where(d > 0.0, np.maximum(f, 0.0), 0.0)
+        return np.where(d > 0.0, np.maximum(f, 0.0) if self.clamp else f, 0.0)
 
     def describe(self) -> dict:
-        return {"law": "viscoelastic", "n": self.n, "gamma": self.gamma}
+        """The law as a record; ``"clamp": False`` only for the unclamped law, so that records written
+        before the option existed (all clamped) read as clamped and compare equal."""
+        return {"law": "viscoelastic", "n": self.n, "gamma": self.gamma, **({} if self.clamp else {"clamp": False})}
 
 
 @dataclass(frozen=True)
@@ -167,13 +197,29 @@ class Precompression:
     def __post_init__(self):
         import math
 
-        try:
-            f = float(self.force)
-        except (TypeError, ValueError):
-            raise ValueError(f"the static force F0 must be a number, got {self.force!r}") from None
+        f = _real(self.force, "the static force F0")
         if not math.isfinite(f) or f < 0.0:
             raise ValueError(f"the static force F0 must be finite and >= 0 (0: no precompression), got {self.force!r}")
+        if f > MAX_STATIC_FORCE:
+            raise ValueError(
+                f"the static force F0 = {f:g} (rescaled) exceeds {MAX_STATIC_FORCE:g}: in rescaled units the struck "
+                "granule moves at speed 1 against contacts of prefactor ~1, so under such a load its dynamic compression "
+                "is below 1e-12 of the static overlap and vanishes in the rounding of double precision (the pulse would "
+                "be invisible); give F0 in 0..1e12 (a chain refuses a smaller one too when its dynamic part is not "
+                "resolvable, granchain.Chain)")
         object.__setattr__(self, "force", f)
+
+    def resolvable(self, mass: float, stiffness: float, n: float, velocity: float) -> float:
+        """D / delta0 at a contact of prefactor ``stiffness`` whose granule of ``mass`` is struck with
+        ``velocity``: the dynamic compression D = v sqrt(m / k0) of a linear oscillation about the static
+        state (k0 = (n-1) c delta0^(n-2), :meth:`linear_stiffness`) over the static overlap delta0 (inf
+        without a load). The kernels add D to delta0 in double precision, which keeps D only to
+        eps delta0 / D: below ``MIN_DYNAMIC_RATIO`` the pulse is lost to rounding."""
+        if self.force == 0.0:
+            return math.inf
+        d0 = float(self.overlaps(stiffness, n))
+        k0 = float(self.linear_stiffness(stiffness, n))
+        return velocity * math.sqrt(mass / k0) / d0
 
     def overlaps(self, stiffness, n: float):
         """delta0_k = (F0 / c_k)^(1/(n-1)) for each contact prefactor c_k (NumPy)."""
@@ -229,17 +275,22 @@ class LoadedEnd:
 
 
 @dataclass(frozen=True)
-class RigidWall:
-    """The chain ends in a rigid wall (a last granule of infinite mass, contact stiffness ``stiffness``,
-    sqrt(2 R_M) for a sphere against a flat wall of the same material, the limit of Eq. r-prime).
-    The pulse comes back from it; the run ends when the wall contact has opened for good."""
+class FixedWall:
+    """The chain ends in a fixed wall: an immovable flat wall (a last granule of infinite mass) with contact
+    stiffness ``stiffness``, sqrt(2 R_M) for a sphere against a wall of the same material (the limit
+    R_{M+1} -> infinity of Eq. r-prime), or that of another material (``Chain.with_wall(material=...)``).
+    The pulse comes back from it; the run ends when the wall contact has opened for good.
+
+    "Rigid" means one thing in granchain: an infinitely stiff wall *material* (``material="rigid"``,
+    1/E* = (1 - nu_M^2)/E_M), which is one kind of fixed wall. This class was called ``RigidWall`` before
+    0.5; that name still works and warns."""
 
     stiffness: float
 
     #: The pulse comes back through the granules behind the front: no relaxed zone, no trailing window.
     licenses_goal_control: ClassVar[bool] = False
     #: What an integrator's record says when its goal-oriented control was switched off here.
-    why_no_goal_control: ClassVar[str] = ("the chain ends in a rigid wall, whose reflected pulse comes back through the "
+    why_no_goal_control: ClassVar[str] = ("the chain ends in a fixed wall, whose reflected pulse comes back through the "
                                           "granules behind the front")
     wall: ClassVar[bool] = True
     #: The run can end when the pulse has come back from the wall (not under precompression: the
@@ -257,6 +308,17 @@ class Impulse:
 
     #: Granules ahead of the pulse are exactly at rest and uncompressed.
     rest_ahead: ClassVar[bool] = True
+
+    def __post_init__(self):
+        v = _real(self.velocity, "velocity (the struck granule's initial speed)")
+        if not (math.isfinite(v) and v > 0.0):
+            raise ValueError(f"velocity (the struck granule's initial speed) must be finite and > 0, got {self.velocity!r}: "
+                             "the chain is struck toward +x, into its granules (to strike the other end, reverse the chain)")
+        g = self.granule
+        if isinstance(g, bool) or not float(_real(g, "granule")).is_integer() or int(g) < 0:
+            raise ValueError(f"granule (the 0-based index of the struck granule) must be a whole number >= 0, got {g!r}")
+        object.__setattr__(self, "velocity", v)
+        object.__setattr__(self, "granule", int(g))
 
     def energy(self, masses) -> float:
         """The energy of the state, all kinetic: m v^2 / 2 of the struck granule."""
@@ -281,6 +343,44 @@ class Striker(Impulse):
     mass: float = 1.0
     radius: float | None = None
 
+    def __post_init__(self):
+        super().__post_init__()
+        m = _real(self.mass, "the striker's mass")
+        if not (math.isfinite(m) and m > 0.0):
+            raise ValueError(f"the striker's mass must be finite and > 0 (rescaled: the reference granule's mass is 1), "
+                             f"got {self.mass!r}")
+        object.__setattr__(self, "mass", m)
+        if self.radius is not None:
+            r = _real(self.radius, "the striker's radius")
+            if not (math.isfinite(r) and r > 0.0):
+                raise ValueError(f"the striker's radius must be finite and > 0 (rescaled: the reference granule's radius "
+                                 f"is 1), or None, got {self.radius!r}")
+            object.__setattr__(self, "radius", r)
+
     def describe(self) -> dict:
         return {"initial": "striker", "velocity": self.velocity, "striker_mass": self.mass,
                 **({"striker_radius": self.radius} if self.radius is not None else {})}
+
+
+def _real(value, what: str) -> float:
+    """``value`` as a float, or a ValueError naming ``what`` (not a bool or a string: a flag or text
+    where a number belongs is a mistake)."""
+    if isinstance(value, (bool, str, bytes)):
+        raise ValueError(f"{what} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be a number, got {value!r}") from None
+
+
+def __getattr__(name):
+    # The boundary was called RigidWall, though its wall is of the granules' own material by default;
+    # "rigid" now means only an infinitely stiff wall material.
+    if name == "RigidWall":
+        import warnings
+
+        warnings.warn("granchain.model.contacts.RigidWall is now FixedWall (an immovable wall, of the granules' "
+                      "material unless another is given; \"rigid\" means an infinitely stiff wall material)",
+                      DeprecationWarning, stacklevel=2)
+        return FixedWall
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

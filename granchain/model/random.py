@@ -40,6 +40,8 @@ def random_decorated(size: int, dist=None, *, seed: int = 0, realization: int = 
     stream of (seed, realization).
     """
     size = count("size", size, minimum=2)
+    seed = count("seed", seed, minimum=0)  # a SeedSequence's entropy: a whole number >= 0
+    realization = count("realization", realization, minimum=0)
     dist = small_radius_distribution(dist, stacklevel=2)
     radii = draw_small_radii(dist, size - 1, seed, [realization])[0]
     return decorated(radii, n=n, initial_velocity=initial_velocity)

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import analysis, bca
-from .._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning
+from .._validate import EFFECTIVE_VALIDITY_LIMIT, EffectiveValidityWarning, output_directory  # noqa: F401 (public here too)
 from .._version import __version__
 from ..model.distributions import Uniform, as_distribution
 from ..units import rescaled_attrs
@@ -256,9 +256,10 @@ def _attrs(kind: str, realizations: int, seed: int, blocks: int, integrator) -> 
     }
 
 
-def _check_common(realizations, blocks, n_large):
+def _check_common(realizations, blocks, n_large, seed=0):
     from .._validate import count
 
+    count("seed", seed, minimum=0)
     realizations = count("realizations", realizations, minimum=4)
     blocks = count("blocks", blocks, minimum=2)
     if blocks > realizations // 2:
@@ -304,11 +305,15 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
     import xarray as xr
     from tqdm.auto import tqdm
 
-    realizations, blocks, Ns = _check_common(realizations, blocks, n_large)
-    a = np.array(sorted(float(x) for x in np.atleast_1d(alphas)))
-    b = np.array(sorted(float(x) for x in np.atleast_1d(betas)))
-    if a.size == 0 or b.size == 0 or a[0] <= 0 or b[-1] > 1:
-        raise ValueError(f"need 0 < alphas and betas <= 1 (small radii in units of the large), got alphas={list(a)}, betas={list(b)}")
+    realizations, blocks, Ns = _check_common(realizations, blocks, n_large, seed)
+    try:
+        a = np.array(sorted(float(x) for x in np.atleast_1d(alphas)))
+        b = np.array(sorted(float(x) for x in np.atleast_1d(betas)))
+    except (TypeError, ValueError):
+        raise ValueError(f"alphas and betas must be sequences of numbers, got alphas={alphas!r}, betas={betas!r}") from None
+    if a.size == 0 or b.size == 0 or not (np.isfinite(a).all() and np.isfinite(b).all()) or a[0] <= 0 or b[-1] > 1:
+        raise ValueError(f"need finite 0 < alphas and betas <= 1 (small radii in units of the large), got "
+                         f"alphas={[float(x) for x in a]}, betas={[float(x) for x in b]}")
     shape = (a.size, b.size, len(Ns))
     ds = xr.Dataset(_variables(("alpha", "beta", "n_large"), shape),
                     coords={"alpha": ("alpha", a, {**rescaled_attrs("radius"), "long_name": "smallest small radius (units of the large radius)"}),
@@ -320,7 +325,7 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
     if not points:  # refused before anything is written: an empty map would look like a finished one
         raise ValueError(f"no grid point has alpha < beta (alphas={[float(x) for x in a]}, betas={[float(x) for x in b]}): "
                          "the small radii are uniform on [alpha, beta], so give at least one alpha below a beta")
-    root = Path(out)
+    root = output_directory(out)
     for i, j, k in tqdm(points, desc="validity map", unit=" points", disable=not progress, dynamic_ncols=True):
         dist = Uniform(a[i], b[j])
         N = Ns[k]
@@ -363,7 +368,7 @@ def compare_distributions(out, distributions=None, *, n_large=(6, 26), realizati
     import xarray as xr
     from tqdm.auto import tqdm
 
-    realizations, blocks, Ns = _check_common(realizations, blocks, n_large)
+    realizations, blocks, Ns = _check_common(realizations, blocks, n_large, seed)
     dists = default_distributions() if distributions is None else {str(k): as_distribution(v) for k, v in dict(distributions).items()}
     names = list(dists)
     ds = xr.Dataset(_variables(("distribution", "n_large"), (len(names), len(Ns))),
@@ -376,7 +381,7 @@ def compare_distributions(out, distributions=None, *, n_large=(6, 26), realizati
                                          for d in dists.values()], {**rescaled_attrs("radius"), "long_name": "std of the small radius"})
     ds["fraction_above_limit"] = ("distribution", [1.0 - float(d.cdf(EFFECTIVE_VALIDITY_LIMIT)) for d in dists.values()],
                                   {"long_name": f"probability of a small radius above {EFFECTIVE_VALIDITY_LIMIT}", "units": "1"})
-    root = Path(out)
+    root = output_directory(out)
     jobs = [(i, k) for k in range(len(Ns)) for i in range(len(names))]
     for i, k in tqdm(jobs, desc="distributions", unit=" points", disable=not progress, dynamic_ncols=True):
         d, N = dists[names[i]], Ns[k]

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._status import Status
+from .._status import Status, final_status
 from .._validate import finite_scalar
 from ..backends import integrator_as_run
 from ..backends.kernels.forces import final_energy, total_momentum
@@ -84,7 +84,7 @@ class PulseResult:
     peak_wall_force_time: float | None = None
     wall_impulse: float | None = None
     #: The integrator as it ran on this chain (``describe()``), with ``"goal_control"`` saying why
-    #: when the chain's boundary switched its relaxed zone and trailing window off (a rigid wall).
+    #: when the chain's boundary switched its relaxed zone and trailing window off (a fixed wall).
     integrator_record: dict | None = None
     dissipated_energy: float = 0.0
     sensor_granule: np.ndarray | None = None
@@ -178,6 +178,12 @@ class PulseResult:
         if self.integrator_record and "goal_control" in self.integrator_record:
             lines.append(f"# goal-oriented error control {self.integrator_record['goal_control']}")
         return "\n".join(lines)
+
+    def plot(self, kind="traces", quantity="velocity", granules=None, ax=None, **kwargs):
+        """Draw the pulse: traces v_k(t) or the space-time diagram; returns the Axes (:func:`granchain.solve.plot.plot_pulse`)."""
+        from .plot import plot_pulse  # (matplotlib loads only when a figure is drawn)
+
+        return plot_pulse(self, kind, quantity, granules, ax, **kwargs)
 
     def to_dataset(self):
         """The result as an ``xarray.Dataset`` (granule dimension, 1-based)."""
@@ -275,7 +281,12 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         than every other one) or, for a chain ending in a wall, after the pulse
         has come back from the wall (wall contact open and the granule next to it
         moving away, without a break for ``exit_margin``), and not before
-        ``t_grid[-1]``; "t_max" integrates to exactly ``t_max``. A precompressed chain has no exit
+        ``t_grid[-1]``; "t_max" integrates to exactly ``t_max`` (the peaks are then the maxima up to
+        it, by request). With "exit" (and ``exit_margin`` > 0, the time the run gives the granules
+        behind the front to finish their peaks), a run whose observed granule is still pushed forward
+        at its last instant (its "peak" is the end of the run) reports status PEAK_AT_END, not SUCCESS;
+        ``exit_margin=0`` asks for the state at the instant the pulse left, peaks so far. A
+        precompressed chain has no exit
         (its loaded contacts do not open): it always runs to ``t_max`` (default: twice the linear
         crossing time, :func:`default_t_max`).
     sensors : sequence of int, optional
@@ -310,6 +321,11 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = integ.integrate(
         chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit" and chain.ends_at_exit), controls=controls,
         sensed=sensed)
+    # a granule still speeding up when a run meant to outlast the pulse stopped (its exit rule or time limit)
+    # has no peak yet (e.g. behind a heavy striker); stop="t_max" asks for maxima up to a chosen time
+    # instead, and exit_margin = 0 for the state at the very instant the pulse left
+    if stop == "exit" and controls.exit_margin > 0:
+        status = final_status(status, peak_t, float(info[INFO_T_END]), _accelerated(chain, x, v))
     if status != Status.SUCCESS:
         import warnings
 
@@ -353,6 +369,20 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         sensor_granule=sensor_labels,
         sensor_force=None if sensor_labels is None else 0.5 * (grid_c[:, 0::2] + grid_c[:, 1::2]).T.copy(),
     )
+
+
+def _accelerated(chain: Chain, x, v) -> np.ndarray:
+    """Per observed granule, whether the final state pushes it forward (its acceleration > 0: its
+    velocity still rising), from the chain's own law in NumPy (``contact.force``; for a precompressed
+    chain the dynamic forces about the static state, as the kernels integrate them)."""
+    law, d0 = chain.contact, chain.overlaps
+    f0 = law.force(d0, chain.stiffness, 0.0)
+    F = law.force(d0 + (x[:-1] - x[1:]), chain.stiffness, v[:-1] - v[1:]) - f0
+    net = np.zeros(chain.size)
+    net[1:] += F
+    net[:-1] -= F
+    obs = chain.observed
+    return net[obs] / chain.masses[obs] > 0.0
 
 
 def _sensor_contacts(chain: Chain, sensors, grid):

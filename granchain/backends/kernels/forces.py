@@ -4,7 +4,7 @@ Equation of motion, paper Eq. (motion_rescaled):
     m_k x_k'' = c_{k-1} (x_{k-1} - x_k)^(n-1) theta(x_{k-1} - x_k)
               - c_k     (x_k - x_{k+1})^(n-1) theta(x_k - x_{k+1}).
 
-A rigid wall at the far end is a last granule of infinite mass (inverse mass 0, contact
+A fixed wall at the far end is a last granule of infinite mass (inverse mass 0, contact
 stiffness sqrt(2 R_M), the limit of Eq. r-prime): it never moves, and the same force routines
 serve it; the stop rule (``stop``) and the energy and momentum sums (which skip it) know about it.
 
@@ -63,8 +63,11 @@ def law_force(d, w, c, p):
     ``w`` = d(delta)/dt, by the chain's contact law: the elastic :func:`contact_force` when
     ``p.gamma`` = 0, else the viscoelastic Hertz force of Kuwabara & Kono (J. Appl. Phys. Jpn. 26,
     1230 (1987)) and Brilliantov et al. (Phys. Rev. E 53, 5382 (1996)),
-    c [d^(n-1) + gamma d^(n-2) w], never attractive (0 while the contact is closed but the damping
-    would pull: the spheres separate freely) and 0 for d <= 0 (``granchain.model.contacts.Viscoelastic``)."""
+    c [d^(n-1) + gamma d^(n-2) w], clamped at 0 when ``p.clamp`` (the default: never attractive, 0 while
+    the contact is closed but the damping would pull, the spheres separate freely), else as published
+    (it pulls at the end of a collision: the law the restitution tables of Schwager & Poschel, Phys. Rev.
+    E 57, 650 (1998) and Ramirez et al., Phys. Rev. E 60, 4465 (1999) are for), and 0 for d <= 0
+    (``granchain.model.contacts.Viscoelastic``)."""
     if p.gamma == 0.0:
         return contact_force(d, c, p)
     if d <= 0.0:
@@ -75,7 +78,9 @@ def law_force(d, w, c, p):
         f = c * (d + p.gamma * w)
     else:
         f = c * d ** (p.n - 2.0) * (d + p.gamma * w)
-    return max(f, 0.0)
+    if p.clamp:
+        return max(f, 0.0)
+    return f
 
 
 @njit(**JIT_INTERNAL)
@@ -83,7 +88,7 @@ def force_rate(d, w, dw, c, p):
     """d/dt of :func:`law_force` for compression ``d``, rate ``w`` and its derivative ``dw`` (the
     relative acceleration): where it falls from + to - the contact force peaks. For the elastic law
     the compression peaks there (w = 0); for the viscoelastic one the force peaks earlier, while the
-    contact still closes. 0 where the force is 0 (open, or clamped)."""
+    contact still closes. 0 where the force is <= 0 (open, clamped, or pulling: no peak there)."""
     if d <= 0.0 or law_force(d, w, c, p) <= 0.0:
         return 0.0
     n, g = p.n, p.gamma
@@ -149,7 +154,8 @@ def accelerations(x, v, fm, hi, F, a, general):
             w = v[j] - v[j + 1]
             f = law_force(d, w, c[j], p)
             if d > 0.0:
-                # Power taken from the motion: (F - F_elastic) w >= 0 (also where F is clamped at 0).
+                # Power taken from the motion: (F - F_elastic) w >= 0 (also where F is clamped at 0, and
+                # where the unclamped law pulls: there it is gamma c d^(n-2) w^2).
                 dissipated += (f - contact_force(d, c[j], p)) * w
             F[j + 1] = f - f0[j]
     for k in range(hi):

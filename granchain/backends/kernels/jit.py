@@ -2,8 +2,10 @@
 so nopython mode is implied: a kernel that cannot compile fully is a bug, not a slow path)."""
 
 JIT = dict(
-    # Keep compiled machine code in __pycache__ so a second process (a Dask
-    # worker, the next test run) skips the ~seconds of LLVM compilation.
+    # Keep compiled machine code on disk so a second process (a Dask worker,
+    # the next run) skips the ~seconds of LLVM compilation: in the per-user
+    # cache directory the package's __init__ points Numba at, never in the
+    # installed package.
     cache=True,
     # No fastmath: results must be bitwise identical whatever the thread count,
     # chunking or worker (reassociation would make them depend on inlining).

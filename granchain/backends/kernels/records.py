@@ -16,17 +16,19 @@ from collections import namedtuple
 
 #: The model's scalar parameters, passed whole through every kernel that reads any of them: ``n`` the
 #: exponent of the power-law contact (granchain.model.contacts.PowerLaw); ``power`` its fast-path code
-#: (``forces.power_code``); ``wall`` whether the far end is a rigid wall (the boundary value of the
-#: chain, ``granchain.model.contacts.RigidWall``: asked here once, not re-derived from the infinite mass).
+#: (``forces.power_code``); ``wall`` whether the far end is a fixed wall (the boundary value of the
+#: chain, ``granchain.model.contacts.FixedWall``: asked here once, not re-derived from the infinite mass).
 #: ``gamma`` the damping time of the viscoelastic contact (``granchain.model.contacts.Viscoelastic``;
 #: 0: elastic), ``static_force`` the precompression F0 (``granchain.model.contacts.Precompression``; 0:
 #: none). A new physics parameter is one more field here, filled in one place
 #: (``granchain.backends.numba_backend.model_params``), and the kernels that need it read it by name:
 #: no signature between them changes (``tests/test_backends.py`` checks this).
-Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force"])
+#: ``clamp``: whether the viscoelastic force is clamped at 0 (never pulls; the default) or may pull, as in
+#: the published law (``Viscoelastic(clamp=False)``; read only where ``gamma`` > 0).
+Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force", "clamp"], defaults=(True,))
 
 #: One chain as the kernels see it (Eq. motion_rescaled). ``masses`` (M,), the last ``inf`` for a
-#: rigid wall; ``stiffness`` (M-1,), the prefactors c_k; ``params`` its :data:`Params`.
+#: fixed wall; ``stiffness`` (M-1,), the prefactors c_k; ``params`` its :data:`Params`.
 Model = namedtuple("Model", ["masses", "stiffness", "params"])
 
 #: A batch of chains of one size for the ensemble kernel: ``masses`` (R, M), ``stiffness`` (R, M-1),

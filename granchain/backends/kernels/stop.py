@@ -1,6 +1,6 @@
 """When a run ends: the pulse has left the chain through its free end, or come back from a wall.
 
-The boundary (``granchain.model.contacts.FreeEnd`` or ``RigidWall``) decides which rule applies; the
+The boundary (``granchain.model.contacts.FreeEnd`` or ``FixedWall``) decides which rule applies; the
 kernels get it as ``Params.wall``, asked once.
 """
 

@@ -2,8 +2,9 @@
 
 ``compute`` runs :func:`granchain.theory.predict` (and its negative control without stiffness
 disorder) and gathers measured values from a ``run_ensemble`` store or Dataset; without one, for
-the paper's law U[0.01, 0.4] at N = 26, the bundled reference (3000 decorated realisations,
-``granchain/_data/theory_reference_U001_04_N26.nc``, written by benchmarks/validate_theory.py).
+the paper's law U[0.01, 0.4] at N = 26, the bundled reference (3000 decorated realisations, the
+ensemble its ``source`` attribute names, ``granchain/_data/theory_reference_U001_04_N26.nc``): a netCDF3
+file, which SciPy's reader opens, so that a base install (no netCDF4, no h5netcdf) draws the figure.
 It also fits the paper's stretched exponential v_k = a exp(-b k^c) to the predicted
 max_t <v_k(t)> over k = 4..N-1, so the theory's a, b, c sit next to the paper's.
 """
@@ -49,7 +50,9 @@ def _measured(measured, distribution, n_large):
         from ...model.distributions import Uniform
 
         if REFERENCE.exists() and distribution == Uniform(0.01, 0.4) and n_large == 26:
-            ref = xr.open_dataset(REFERENCE).load()
+            # netCDF3 (64-bit offset): SciPy reads it, so a base install draws the figure without netCDF4 or h5netcdf
+            with xr.open_dataset(REFERENCE, engine="scipy") as opened:
+                ref = opened.load()
             found = re.search(r"realizations=(\d+)", ref.attrs["source"])  # the legend names the size, not the call
             size = f", {found.group(1)} realisations" if found else ""
             return {name: (ref[name].values, ref[f"{name}_stderr"].values) for name in
