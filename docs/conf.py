@@ -93,10 +93,10 @@ _write_top_level_api()
 # docs/build) reports every unresolved reference; these are known and harmless:
 nitpick_ignore = [
     ("py:class", "enum.IntEnum"),                     # Status's base: no intersphinx (the build runs offline)
-    ("py:class", "granchain.analysis._Fit"),          # private base class of the fit results (analysis/__init__.py)
+    ("py:class", "granchain.analysis.fits._Fit"),     # private base class of the fit results (analysis/fits.py)
     ("py:class", "granchain.model.distributions._Base"),   # private base class of Uniform/Truncated (model/distributions.py)
-    ("py:class", "granchain.families._Decorated"),    # private base of RandomDecorated/TaperedDecorated (families/__init__.py)
-    ("py:class", "granchain.families._RadiiFamily"),  # private base of RandomRadii/BinaryRandom (families/__init__.py)
+    ("py:class", "granchain.families.decorated_families._Decorated"),  # private base of RandomDecorated/TaperedDecorated
+    ("py:class", "granchain.families.radii_families._RadiiFamily"),    # private base of RandomRadii/BinaryRandom
     ("py:attr", "correlation"),                       # analysis.StretchedExpFit: backquoted attribute names
     ("py:meth", "stderr"),                            # analysis.StretchedExpFit / compare_curves: idem
 ]

@@ -584,3 +584,20 @@ def test_a_new_params_field_compiles_and_reaches_the_forces(tmp_path):
     np.testing.assert_allclose(stiff["peak_velocity"], plain["peak_velocity"], rtol=2e-6)
     np.testing.assert_allclose(stiff["peak_time"], scale * np.asarray(plain["peak_time"]), rtol=0, atol=2e-5)
     np.testing.assert_allclose(stiff["ensemble"], scale * np.asarray(plain["ensemble"]), rtol=0, atol=2e-4)
+
+
+def test_the_numba_backend_asks_the_initial_state_for_rest_ahead():
+    """The kernels integrate only the granules the pulse has reached, exact only when the initial state
+    declares the others at rest (``rest_ahead``): the Numba backend refuses one that does not, and the
+    SciPy backend, which integrates every granule, runs it."""
+    from granchain.model.contacts import Impulse
+
+    class Moving(Impulse):  # a hypothetical initial state with granules ahead of the pulse in motion
+        rest_ahead = False
+
+    chain = gc.monodisperse(3)
+    object.__setattr__(chain, "initial", Moving(1.0))
+    with pytest.raises(ValueError, match="needs every other granule at rest"):
+        get_backend("numba").check(gc.DP5(), chain)
+    get_backend("scipy").check(gc.DOP853(), chain)
+    get_backend("numba").check(gc.DP5(), gc.monodisperse(3))  # the paper's impulse declares it

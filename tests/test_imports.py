@@ -2,8 +2,8 @@
 
 A cycle makes the result of an import depend on which module is imported first (a name used at
 module level may not exist yet). The graph is read from the source with ``ast``: module-level
-imports only; imports inside functions are deliberate lazy imports (pint, matplotlib, the
-averaged-pulse fits offered by ``granchain.analysis``) and run after every module has loaded.
+imports only; imports inside functions are deliberate lazy imports (pint, matplotlib, Numba and the
+kernels) and run after every module has loaded. Which layer may import which is ``tests/test_layers.py``'s.
 """
 
 from __future__ import annotations
@@ -162,3 +162,38 @@ def test_moved_modules_as_attributes_warn(name):
         module = getattr(gc, name)
     assert module.__name__ == f"granchain.paper.{name}"
     assert any(r.filename == __file__ for r in record)
+
+
+def _loaded_after(code: str) -> list[str]:
+    """The Numba and kernel modules loaded in a fresh interpreter after ``code`` ran."""
+    import subprocess
+    import sys
+
+    probe = (f"{code}\nimport sys\n"
+             "print(sorted(m for m in sys.modules if m == 'numba' or m.startswith('numba.') "
+             "or m == 'granchain.backends.kernels' or m.startswith('granchain.backends.kernels.')))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
+    return eval(out.strip().splitlines()[-1])  # a printed list of module names
+
+
+def test_import_granchain_loads_neither_numba_nor_the_kernels():
+    """``import granchain`` does not import Numba (about 0.3 s) nor the kernels (nor hash their sources to
+    choose the per-user cache directory, which ``granchain.backends.kernels`` does when it is imported):
+    they load on the first run (``simulate``, ``run_ensemble``, a design evaluation). Negative control:
+    after one ``simulate`` in the same fresh interpreter both are there, so the probe does see them."""
+    assert _loaded_after("import granchain") == []
+    loaded = _loaded_after("import granchain\ngranchain.simulate(granchain.monodisperse(3))")
+    assert "numba" in loaded and "granchain.backends.kernels" in loaded, loaded
+    assert "granchain.backends.kernels.dispatch" in loaded, loaded
+
+
+def test_info_slots_are_offered_by_the_backends():
+    """The ``info`` record's slots are read through ``granchain.backends`` (loaded on first access)
+    and are the kernels' own."""
+    import granchain.backends as backends
+    from granchain.backends.kernels import records
+
+    for name in backends.INFO_SLOTS:
+        assert getattr(backends, name) == getattr(records, name)
+    with pytest.raises(AttributeError, match="no attribute 'INFO_NOTHING'"):
+        backends.INFO_NOTHING  # noqa: B018

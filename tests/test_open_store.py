@@ -203,10 +203,10 @@ def test_the_check_finds_direct_opens():
 
 
 def test_no_module_but_the_store_opens_zarr_with_xarray():
-    """Only the store's own modules open Zarr with xarray: the writer (``store``: resuming, checking
+    """Only the store's own modules open Zarr with xarray: the writer (``sinks``: resuming, checking
     chunks) and the reader (``read``: :func:`granchain.open_store`); every other module goes through
     ``open_store``."""
-    own = {PACKAGE / "ensembles" / "store.py", PACKAGE / "ensembles" / "read.py"}
+    own = {PACKAGE / "ensembles" / "sinks.py", PACKAGE / "ensembles" / "read.py"}
     found = {}
     for path in sorted(PACKAGE.rglob("*.py")):
         if path in own:

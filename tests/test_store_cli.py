@@ -32,7 +32,7 @@ def test_info_reports_parameters_progress_and_damage(store, tmp_path, capsys):
     damaged = tmp_path / "d.zarr"
     shutil.copytree(store, damaged)
     os.remove(damaged / "peak_velocity" / "0.1.0")
-    assert main(["info", "--json", str(damaged)]) == 0
+    assert main(["info", "--json", str(damaged)]) == 1
     info = json.loads(capsys.readouterr().out)
     assert list(info["damaged_chunks"]) == ["1"] and "peak_velocity/0.1.0" in info["damaged_chunks"]["1"]
 
@@ -88,7 +88,7 @@ def test_export_refuses_a_damaged_store_unless_told_not_to_verify(store, tmp_pat
     err = capsys.readouterr().err
     assert "chunk 0 does not match its checksum: the data file peak_velocity/0.0.0" in err and "--no-verify" in err, err
     assert not nc.exists()
-    assert main(["info", str(damaged)]) == 0
+    assert main(["info", str(damaged)]) == 1  # damage reported, and in the exit status
     out = capsys.readouterr().out
     assert "damaged      chunk 0 does not match its checksum: the data file peak_velocity/0.0.0" in out and "intact" not in out
     assert main(["export", "--no-verify", str(damaged), str(nc)]) == 0  # the CLI prints warnings on stderr

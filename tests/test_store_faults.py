@@ -332,7 +332,7 @@ def test_every_reader_refuses_what_info_reports(reference, other_seed, tmp_path,
     assert not (tmp_path / "x.nc").exists()
     facts = summary(str(path))
     assert any(re.search(words, line) for line in facts["damaged"] + [f"chunk {j} {w}" for j, w in facts["damaged_chunks"].items()]), facts
-    assert main(["info", str(path)]) == 0
+    assert main(["info", str(path)]) == 1  # damage reported, and in the exit status
     assert "intact" not in capsys.readouterr().out
     with pytest.warns(StoreVerificationWarning, match="without verifying"):
         if fault == "truncated-chunk":  # nothing can decode that file: still refused, naming what to do

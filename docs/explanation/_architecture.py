@@ -49,7 +49,7 @@ BOXES = {
     "solve": (8.6, 4.15, 6.0, 1.95, CORE, False, "granchain.solve",
               "integrators: values with capabilities\n(DP5, RKN4, Verlet, DOP853; INTEGRATORS)\n"
               "simulate(chain) -> PulseResult"),
-    "kernels": (1.4, 2.0, 5.2, 1.6, CORE, False, "granchain.backends.kernels (Numba)",
+    "kernels": (1.4, 2.0, 5.2, 1.6, CORE, True, "granchain.backends.kernels (Numba)",
                 "records (Params, Model, Method, Run, ...), forces,\nwindow, stop, peaks, dense, rkloop, dp5, rkn4,\n"
                 "verlet, dispatch, batch, aligned, memory, jit"),
     "units": (8.6, 2.0, 4.9, 1.6, UNITS, False, "granchain.units",

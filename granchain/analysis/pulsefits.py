@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import analysis as _A
+from .amplitude import averaged_pulse_peak, pulse_peak
+from .fits import PAPER_FIG2, fit_linear, fit_stretched_exp, stretched_exp
 from .jackknife import ChunkSums, Jackknife, chunk_jackknife, jackknife_stderr
 
 __all__ = ["PulseFit", "CurveAgreement", "pulse_means", "pulse_jackknife", "fit_averaged_decay",
@@ -110,12 +111,12 @@ def fit_averaged_decay(ds, chain="effective", fit_range=(4, 25), sums: ChunkSums
     granule, time = ds["granule"].values, ds["time"].values.astype(float)
 
     def stat(means, full):
-        v, t, _, _ = _A.pulse_peak(time, means[chain])
+        v, t, _, _ = pulse_peak(time, means[chain])
         if variable == "k":
-            f = _A.fit_stretched_exp(granule, v, fit_range=fit_range, variable="k")
+            f = fit_stretched_exp(granule, v, fit_range=fit_range, variable="k")
         else:
             sel = _range_mask(granule, fit_range)
-            f = _A.fit_stretched_exp(t[sel], v[sel], variable="t")
+            f = fit_stretched_exp(t[sel], v[sel], variable="t")
         return f if full else f.params
 
     q = "max_t <v_k(t)> = a exp(-b k^c)" if variable == "k" else "max_t <v_k(t)> = a' exp(-b' t^c')"
@@ -128,8 +129,8 @@ def fit_averaged_arrival(ds, chain="effective", fit_range=(2, 25), sums: ChunkSu
     granule, time = ds["granule"].values, ds["time"].values.astype(float)
 
     def stat(means, full):
-        _, t, _, _ = _A.pulse_peak(time, means[chain])
-        f = _A.fit_linear(granule, t, fit_range=fit_range)
+        _, t, _, _ = pulse_peak(time, means[chain])
+        f = fit_linear(granule, t, fit_range=fit_range)
         return f if full else f.params
 
     return _pulse_fit(ds, "argmax_t <v_k(t)> = slope k + intercept", chain, fit_range, stat, sums)
@@ -142,11 +143,11 @@ def rounding_envelope(x, params, half_units) -> np.ndarray:
     the digits printed (a = 0.756 means 0.7555..0.7565).
     """
     x = np.asarray(x, dtype=float)
-    base = _A.stretched_exp(x, *params)
+    base = stretched_exp(x, *params)
     dev = np.zeros_like(base)
     for signs in itertools.product((-1, 1), repeat=len(params)):
         p = [q + s * h for q, s, h in zip(params, signs, half_units)]
-        dev = np.maximum(dev, np.abs(_A.stretched_exp(x, *p) / base - 1))
+        dev = np.maximum(dev, np.abs(stretched_exp(x, *p) / base - 1))
     return dev
 
 
@@ -182,7 +183,7 @@ class CurveAgreement:
 
 
 def paper_curve_agreement(ds, chain="effective", fit_range=(4, 25), sums: ChunkSums | None = None,
-                          paper=_A.PAPER_FIG2, half_units=(5e-4, 5e-4, 5e-4), fit: PulseFit | None = None) -> CurveAgreement:
+                          paper=PAPER_FIG2, half_units=(5e-4, 5e-4, 5e-4), fit: PulseFit | None = None) -> CurveAgreement:
     """The headline comparison of Fig. 2: our fitted curve against the paper's, per granule.
 
     ``fit``: the :func:`fit_averaged_decay` of the same Dataset, chain, range and ``sums`` (variable
@@ -193,7 +194,7 @@ def paper_curve_agreement(ds, chain="effective", fit_range=(4, 25), sums: ChunkS
     _check_chain(ds, chain)
     granule, time = ds["granule"].values, ds["time"].values.astype(float)
     k = granule[_range_mask(granule, fit_range)].astype(float)
-    ref = _A.stretched_exp(k, *paper)
+    ref = stretched_exp(k, *paper)
     if fit is not None:
         groups = 0 if fit.replicates is None else fit.replicates.shape[0]
         if (fit.chain, fit.variable, tuple(fit.fit_range)) != (chain, "k", tuple(int(x) for x in fit_range)) or \
@@ -204,12 +205,12 @@ def paper_curve_agreement(ds, chain="effective", fit_range=(4, 25), sums: ChunkS
         if sums is None:
             jk = Jackknife(value, np.full(value.shape, np.nan), np.empty((0,) + value.shape), 0, "none")
         else:
-            reps = np.stack([_A.stretched_exp(k, *p) / ref - 1 for p in fit.replicates])
+            reps = np.stack([stretched_exp(k, *p) / ref - 1 for p in fit.replicates])
             jk = Jackknife(value, jackknife_stderr(reps), reps, reps.shape[0], fit.method)
     else:
         def stat(means):
-            v, _, _, _ = _A.pulse_peak(time, means[chain])
-            return _A.fit_stretched_exp(granule, v, fit_range=fit_range)(k) / ref - 1
+            v, _, _, _ = pulse_peak(time, means[chain])
+            return fit_stretched_exp(granule, v, fit_range=fit_range)(k) / ref - 1
 
         jk = pulse_jackknife(ds, stat, sums)
     err, method = jk.stderr, jk.method
@@ -235,14 +236,14 @@ def averaged_peak_gap(ds, granule=None, sums: ChunkSums | None = None) -> Jackkn
     time = ds["time"].values.astype(float)
 
     def stat(means):
-        vd = _A.pulse_peak(time, means["decorated"][i:i + 1])[0][0]
-        ve = _A.pulse_peak(time, means["effective"][i:i + 1])[0][0]
+        vd = pulse_peak(time, means["decorated"][i:i + 1])[0][0]
+        ve = pulse_peak(time, means["effective"][i:i + 1])[0][0]
         return vd / ve - 1.0
 
     jk = pulse_jackknife(ds, stat, sums)
     if sums is not None:
         return jk
-    d, e = _A.averaged_pulse_peak(ds, "decorated"), _A.averaged_pulse_peak(ds, "effective")
+    d, e = averaged_pulse_peak(ds, "decorated"), averaged_pulse_peak(ds, "effective")
     r = d.velocity[i] / e.velocity[i]
     err = r * np.hypot(d.velocity_stderr[i] / d.velocity[i], e.velocity_stderr[i] / e.velocity[i])
     return Jackknife(jk.value, np.asarray(err), jk.replicates, 0,

@@ -63,7 +63,7 @@ def averaged_pulse(ds, chain: str | None = None, *, scale=None) -> AveragedPulse
         SI axes with this scale; False: the paper's rescaled units; None (default): the scale the store
         recorded (``granchain ensemble --material``) if any, else rescaled units.
     """
-    from . import _chain, _dataset
+    from ._read import _chain, _dataset
     from ..solve.plot import Units
 
     ds = _dataset(ds)

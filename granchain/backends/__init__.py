@@ -25,7 +25,38 @@ import numpy as np
 
 from ..model.contacts import PowerLaw
 
-__all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run"]
+__all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run", "final_energy_momentum"]
+
+#: The slots of the ``info`` record every backend fills (defined with the kernels, in
+#: :mod:`granchain.backends.kernels.records`): offered here so that callers read a run's record through
+#: this package, and loaded on first access, so that ``import granchain`` loads neither Numba nor the kernels.
+INFO_SLOTS = ("INFO_T_END", "INFO_STEPS", "INFO_REJECTED", "INFO_EXIT", "INFO_EVALUATIONS", "INFO_WINDOW_START",
+              "INFO_FROZEN_POTENTIAL", "INFO_DISSIPATED", "INFO_SIZE")
+
+
+def __getattr__(name):
+    if name in INFO_SLOTS:
+        from .kernels import records
+
+        return getattr(records, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def final_energy_momentum(chain, x, v, info) -> tuple[float, float]:
+    """(E_end, P_end) of ``chain`` in the final state (x, v) of a run whose record is ``info``: the
+    energy with what a viscoelastic law dissipated added (``info``'s dissipated slot) and the energies
+    that granules leaving a trailing window had then, summed by the kernels' own routines
+    (``kernels.forces.final_energy``, ``total_momentum``) whichever backend ran: ``simulate``'s
+    ``energy_error`` and ``momentum_error`` come from here."""
+    from .kernels.forces import final_energy, total_momentum
+    from .kernels.records import INFO_DISSIPATED
+    from .numba_backend import kernel_array, model_params
+
+    dissipated = float(info[INFO_DISSIPATED])
+    # (the chain's arrays as the kernels take them, writable: the types the ensemble kernel compiles these for)
+    masses, stiffness = kernel_array(chain.masses), kernel_array(chain.stiffness)
+    e1 = final_energy(x, v, masses, stiffness, model_params(chain), info) + dissipated
+    return e1, total_momentum(v, masses)
 
 
 def effective_integrator(integrator, chain):

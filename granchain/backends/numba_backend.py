@@ -110,6 +110,16 @@ class NumbaBackend(Backend):
     name = "numba"
     contact_laws = (PowerLaw, Viscoelastic)
 
+    def check(self, integrator, chain) -> None:
+        """Besides :meth:`Backend.check`: the kernels integrate only the granules the pulse has reached
+        (``kernels.window``), which is exact only when the initial state declares every granule ahead of
+        the pulse at rest (``rest_ahead``): an initial state that does not is refused, not run wrong."""
+        super().check(integrator, chain)
+        if not chain.initial.rest_ahead:
+            raise ValueError(f"the {self.name} backend integrates only the granules the pulse has reached and needs "
+                             f"every other granule at rest; the initial state {chain.initial!r} does not say so: "
+                             "use DOP853 (integrator='dop853'), which integrates every granule")
+
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         self.check(integrator, chain)
         integrator.check_chains(chain.masses[None], chain.stiffness[None], chain.n, chain.initial_velocity)

@@ -180,7 +180,7 @@ def build_integrator(args, chains, conservative: bool = True):
     given = {"rtol": args.rtol, "atol": args.atol, "dt": args.step}
     fields = {f.name for f in dataclasses.fields(cls or DP5)}
     wrong = [f"--{'step' if k == 'dt' else k}" for k, v in given.items() if v is not None and k not in fields]
-    adaptive = cls is None or issubclass(cls, DP5)  # DP5 and RKN4: the goal-oriented settings
+    adaptive = cls is None or cls.supports_goal_control  # DP5 and RKN4: the goal-oriented settings
     if args.error_control is not None and not adaptive:
         wrong.append("--error-control")
     if wrong:

@@ -13,7 +13,8 @@ def add_parser(subparsers) -> None:
         help="describe an ensemble store: parameters, family, integrator, progress, failures, size, how to resume",
         description="Read an ensemble store written by `granchain ensemble` (or run_ensemble(out=...)) without changing it: "
                     "its parameters, progress, integration failures, size on disk, the writer holding it (if any), "
-                    "a check of every finished chunk against its checksums, and the command that continues it.",
+                    "a check of every finished chunk against its checksums, and the command that continues it. "
+                    "Exit status 1 when the store is damaged (the lines marked 'damaged' say where).",
     )
     p.add_argument("store", help="the Zarr store, e.g. runs/N26.zarr")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -136,9 +137,11 @@ def run(args) -> int:
     from .._status import Status
 
     info = summary(args.store)
+    # a script that checks a store before using it learns of damage from the exit status, as from export's
+    damaged = bool(info["damaged_chunks"] or info["damaged"] or info["unreadable"])
     if args.json:
         print(json.dumps(info, indent=1, sort_keys=True))
-        return 0
+        return int(damaged)
     fam = dict(info["family"])
     lines = [
         f"store        {info['store']} ({_human(info['size_bytes'])} on disk, granchain {info['granchain_version']})",
@@ -181,4 +184,4 @@ def run(args) -> int:
         lines.append("intact       every chunk, the averaged pulse and the parameter record match their checksums; "
                      "export with: granchain export STORE FILE.nc")
     print("\n".join(lines))
-    return 0
+    return int(damaged)

@@ -121,7 +121,7 @@ def _masses(space, X, radii) -> np.ndarray:
 
 
 def output_directory(out, option: str = "out") -> str:
-    """``out`` as a string if it can be a directory of results (:func:`granchain._validate.output_directory`:
+    """``out`` as a string if it can be a directory of results (``granchain._validate.output_directory``:
     not empty, not an existing file, inside a folder that exists or can be made and is writable), else an
     error naming ``option``; nothing is created."""
     from .._validate import output_directory as checked

@@ -1,7 +1,7 @@
 """Reading a store: :func:`open_store`, which every granchain reader uses (the analysis, the figures,
 ``granchain info``, ``export``, ``theory``, the jackknife over chunks), with the records and metadata in
 the form this version writes (the schema, :mod:`~granchain.ensembles.schema`, and the compatibility
-layer of :mod:`~granchain.ensembles.store`), writing nothing.
+layer of :mod:`~granchain.ensembles.compat`), writing nothing.
 """
 
 from __future__ import annotations
@@ -12,14 +12,10 @@ import os
 import numpy as np
 
 from .schema import ALIGNED, AVERAGED, FORCES, PROGRESS, PROGRESS_ALIGNED, RESULTS, WALL, WINDOW
-from .store import (
-    _CHECKED_ATTRS,
-    _PROGRESS_ABOUT,
-    _short,
-    current_record,
-    empty_dataset,
-    stored_parameters,
-)
+from .compat import current_record
+from .files import _short
+from .layout import _CHECKED_ATTRS, _PROGRESS_ABOUT, empty_dataset
+from .params import stored_parameters
 
 __all__ = ["open_store"]
 
@@ -68,7 +64,7 @@ def open_store(path, *, group: str | None = None, load: bool = False, verify: bo
     xarray.Dataset
         The stored values, unchanged. The records (attributes ``granchain_parameters``,
         ``granchain_family``, ``granchain_integrator``) are in today's form (the compatibility layer
-        ``granchain.ensembles.store.current_record`` that a resume compares records with:
+        ``granchain.ensembles.compat.current_record`` that a resume compares records with:
         ``results_version`` instead of the package version, earlier meanings of family fields
         translated, and for a store of granchain 0.1.0 its family and integrator as records); the other
         attributes granchain writes and the variables' metadata (units, long_name, flags) are those a

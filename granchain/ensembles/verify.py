@@ -77,7 +77,7 @@ def store_identity(record_text: str) -> bytes:
 
 
 def attributes_digest(attrs: dict) -> dict:
-    """The digest of a store's root attributes (as read back from its ``.zattrs``), less :data:`VOLATILE`:
+    """The digest of a store's root attributes (as read back from its ``.zattrs``), less ``VOLATILE``:
     ``{"keys": [...], "blake2b": hex}``; the keys say which attributes it covers."""
     keys = sorted(k for k in attrs if k not in VOLATILE)
     return {"keys": keys, "blake2b": hashlib.blake2b(_canonical({k: attrs[k] for k in keys}), digest_size=16).hexdigest()}
@@ -209,7 +209,7 @@ class StoreCheck:
                                  "cannot be verified")
             return
         if root_text != copy:
-            from .store import _flatten
+            from .params import _flatten
 
             try:
                 a, b = _flatten(json.loads(root_text)), _flatten(json.loads(copy))

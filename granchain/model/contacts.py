@@ -5,7 +5,7 @@ sentinels:
 
 - :class:`PowerLaw` (paper Eq. hertz-1, Hertz for n = 5/2): forces depend on positions only
   (``conservative``: what licenses Nystrom methods, Verlet and a conserved energy) and vanish when a
-  contact opens (``tensionless``: an opened contact is where a pulse leaves granules behind).
+  contact opens (an opened contact is where a pulse leaves granules behind).
 - :class:`Viscoelastic` (Kuwabara & Kono 1987; Brilliantov et al. 1996): the Hertz force plus a
   damping term in the rate of compression; not conservative (only DP5 and DOP853 integrate it), and
   the energy it takes is integrated with the motion.
@@ -52,8 +52,6 @@ class PowerLaw:
 
     #: Forces depend on positions only (x'' = f(x)).
     conservative: ClassVar[bool] = True
-    #: No force across an open contact (no tension, no precompression).
-    tensionless: ClassVar[bool] = True
 
     #: No damping: the kernels' ``Params.gamma``.
     gamma: ClassVar[float] = 0.0
@@ -105,8 +103,6 @@ class Viscoelastic:
     gamma: float
     n: float = 2.5
     clamp: bool = True
-
-    tensionless: ClassVar[bool] = True
 
     @property
     def conservative(self) -> bool:

@@ -14,7 +14,8 @@ import json
 import time
 from pathlib import Path
 
-from .. import __version__, analysis
+from .. import analysis
+from .._version import __version__
 from ..ensembles.run import default_time_grid, run_ensemble
 from ..ensembles.store import stored_record
 from ..model.distributions import Uniform

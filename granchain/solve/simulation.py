@@ -10,15 +10,6 @@ import numpy as np
 from .._status import Status, final_status
 from .._validate import finite_scalar
 from ..backends import integrator_as_run
-from ..backends.kernels.forces import final_energy, total_momentum
-from ..backends.kernels.records import (
-    INFO_DISSIPATED,
-    INFO_EVALUATIONS,
-    INFO_EXIT,
-    INFO_REJECTED,
-    INFO_STEPS,
-    INFO_T_END,
-)
 from ..model.chain import Chain
 from ..units import rescaled_attrs
 from .integrators import RunControls, get_integrator
@@ -321,6 +312,10 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = integ.integrate(
         chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit" and chain.ends_at_exit), controls=controls,
         sensed=sensed)
+    # (the info record's slots, through the backends' seam: the kernels that define them load on first use,
+    # not with ``import granchain``)
+    from ..backends import INFO_DISSIPATED, INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END
+
     # a granule still speeding up when a run meant to outlast the pulse stopped (its exit rule or time limit)
     # has no peak yet (e.g. behind a heavy striker); stop="t_max" asks for maxima up to a chosen time
     # instead, and exit_margin = 0 for the state at the very instant the pulse left
@@ -332,13 +327,10 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         warnings.warn(f"simulate: the integration did not succeed: {Status(status).name} ({Status(status).message}); "
                       "check result.status before using the peaks", RuntimeWarning, stacklevel=2)
     e0, p0 = chain.energy, chain.momentum
-    from ..backends import numba_backend  # (imported on first use: importing granchain does not load the backends)
+    from ..backends import final_energy_momentum
 
     dissipated = float(info[INFO_DISSIPATED])
-    # (the chain's arrays as the kernels take them, writable: the types the ensemble kernel compiles these for)
-    masses, stiffness = numba_backend.kernel_array(chain.masses), numba_backend.kernel_array(chain.stiffness)
-    e1 = final_energy(x, v, masses, stiffness, numba_backend.model_params(chain), info) + dissipated
-    p1 = total_momentum(v, masses)
+    e1, p1 = final_energy_momentum(chain, x, v, info)
     wall = chain.wall
     return PulseResult(
         chain=chain,
