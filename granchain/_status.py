@@ -45,9 +45,10 @@ _MESSAGES = {
     Status.MAX_STEPS: "the step budget (max_steps) ran out: raise max_steps or loosen rtol",
     Status.STEP_UNDERFLOW: "the step size underflowed: the chain is too stiff for these tolerances",
     Status.NONFINITE: "the state became non-finite (NaN/inf)",
-    Status.PEAK_AT_END: "the run ended before the pulse had passed every observed granule: a granule's velocity was "
-                        "still rising at the last instant, so its 'peak' is the end of the run, not a maximum (raise "
-                        "t_max, or strike with a lighter striker)",
+    Status.PEAK_AT_END: "the run ended while an observed granule was still speeding up, so its 'peak' is the end of "
+                        "the run, not a maximum (a late hump from rattling light granules, or a heavy striker still "
+                        "pushing): give the granules more time with a larger exit_margin, or run to a fixed time "
+                        "(stop='t_max', t_max=...)",
 }
 
 

@@ -9,6 +9,7 @@ the time; absolute near t = 0) of DOP853 at rtol 1e-10 / atol 1e-12.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from hypothesis import strategies as hs
 
 import granchain as gc
 from granchain import bca
+from granchain._status import Status
 
 # Small radii of decorated chains: the paper's range [0.01, 0.4], N = 2..26 large granules.
 small_radii = hs.lists(hs.floats(0.01, 0.4), min_size=1, max_size=25)
@@ -142,27 +144,48 @@ def assert_same_peaks(a, b, rel=1e-6):
     np.testing.assert_allclose(a.peak_velocity[ok], b.peak_velocity[ok], rtol=rel, atol=0)
     # relative to the time, absolute near t = 0 (granule 1 peaks at t = 0)
     dt = np.abs(a.peak_time - b.peak_time)
-    bad = ok & (dt > rel * np.maximum(np.abs(b.peak_time), 1.0))
+    tol = np.full(dt.shape, rel)
+    if not b.chain.wall and b.granule[-1] == b.chain.size:
+        # The free end has no maximum: it speeds up until its last contact opens and then coasts, with
+        # v = v_end - C (t_open - t)^(n) (force ~ delta^(n-1), delta ~ t_open - t). A velocity error eps
+        # moves the located "peak" by ~(eps / C)^(1/n): 1e-10 gives ~1e-4 for n = 5/2. Its time is compared
+        # at that conditioning (its velocity, the plateau, at the contract's).
+        tol[-1] = 1e-4
+    bad = ok & (dt > tol * np.maximum(np.abs(b.peak_time), 1.0))
     assert not bad.any(), f"peak times differ at granules {a.granule[bad]}: {a.peak_time[bad]} vs {b.peak_time[bad]}"
 
 
-def test_out_of_order_peaks_are_not_resolved_by_the_reference():
-    """Why :func:`assert_same_peaks` skips out-of-order peaks: on the sweep's failing chain the
-    reference itself moves that peak by more than the contract between rtol 1e-10 and 1e-12, while
-    the in-order peaks agree to 1e-8."""
+def test_a_late_hump_cut_by_the_exit_rule_is_reported_and_resolved_by_a_longer_margin():
+    """Why :func:`assert_same_peaks` skips out-of-order peaks: on the sweep's failing chain granule 4
+    peaks after granule 5, in a late hump that rattling light granules raise above its pulse, and the
+    exit rule ends the run while that hump is still rising. Both integrators then record the run's
+    end, not a maximum, and say so (PEAK_AT_END); given the time (a larger exit_margin), both find the
+    hump's maximum and agree to 1e-8 at every granule (negative control: the cut values are ~1 % low)."""
     chain = gc.decorated([0.01, 0.4, 0.01, 0.4])
-    b = gc.simulate(chain, gc.DOP853(rtol=1e-10, atol=1e-12))
-    c = gc.simulate(chain, gc.DOP853(rtol=1e-12, atol=1e-14))
-    ok = in_order(b)
-    assert not ok.all()
-    rel = np.abs(b.peak_velocity / c.peak_velocity - 1.0)
-    assert rel[~ok].max() > 1e-6 and rel[ok].max() < 1e-8, rel
+    with pytest.warns(RuntimeWarning, match="PEAK_AT_END"):
+        b = gc.simulate(chain, gc.DOP853(rtol=1e-10, atol=1e-12))
+    assert b.status == Status.PEAK_AT_END and not in_order(b).all()
+    assert b.peak_time[3] == pytest.approx(b.t_end, rel=1e-12)
+    long_a = gc.simulate(chain, exit_margin=10.0)
+    long_b = gc.simulate(chain, gc.DOP853(rtol=1e-10, atol=1e-12), exit_margin=10.0)
+    assert long_a.ok and long_b.ok and long_b.peak_time[3] < long_b.t_end - 1.0
+    np.testing.assert_allclose(long_a.peak_velocity, long_b.peak_velocity, rtol=1e-8, atol=0)
+    assert long_b.peak_velocity[3] > 1.01 * b.peak_velocity[3]
 
 
 def _compare_with_reference(chain, reference):
-    a = gc.simulate(chain)
-    b = gc.simulate(chain, reference)
-    assert a.ok and b.ok
+    """Peaks of DP5 and the reference agree. A run the exit rule ended on a granule's late hump
+    (PEAK_AT_END: see the test above) is compared at the other granules: the hump's granule is out of
+    order, which :func:`assert_same_peaks` skips."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*PEAK_AT_END", category=RuntimeWarning)
+        a = gc.simulate(chain)
+        b = gc.simulate(chain, reference)
+    for r in (a, b):
+        assert r.status in (Status.SUCCESS, Status.PEAK_AT_END), r.status
+        if r.status == Status.PEAK_AT_END:  # only a late hump may be cut, never the pulse's own peak
+            at_end = r.peak_time >= r.t_end * (1 - 1e-12)
+            assert not (at_end & in_order(r) & (np.arange(r.granule.size) < r.granule.size - 1)).any(), r.peak_time
     assert_same_peaks(a, b)
     return a, b
 
