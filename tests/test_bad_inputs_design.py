@@ -133,7 +133,13 @@ CASES = [
         r"existing file, not a directory"),
     Api("out-under-file", lambda tmp: design.optimize(TaperedSpace(20), "wall-force", out=_file(tmp) / "run"),
         r"cannot create its folder"),
+    Api("backend-unknown", _run(_taper(), backend="gpu"), r"backend must be one of \['cpu', .*'cuda'\]"),
+    Api("backend-number", _run(_taper(), backend=2), r"backend must be one of"),
+    Api("switch-backend-string", _run(_taper(), switch_backend="yes"), r"switch_backend must be True or False"),
+    Api("evaluator-backend-unknown", lambda tmp: design.BatchEvaluator(TaperedSpace(20), "wall-force", backend="gpu"),
+        r"backend must be one of"),
     # -- the command line -----------------------------------------------------------------------------------
+    Cli("cli-backend-unknown", ["design", "--out", "{tmp}/d", "--backend", "gpu"], r"--backend: invalid choice: 'gpu'"),
     Cli("cli-max-radius", ["design", "--out", "{tmp}/d", "--max-radius", "0.5"], r"--max-radius\) at least 1"),
     Cli("cli-max-length", ["design", "--out", "{tmp}/d", "--max-length", "0.1"], r"--max-length\) at least"),
     Cli("cli-size-huge", ["design", "--out", "{tmp}/d", "--size", "100000"], r"--size\) to at most 2000"),

@@ -62,6 +62,10 @@ CASES = [
     Cli("reproduce-realizations-few", ["reproduce", "--realizations", "5", "--out", "{tmp}/r"], r"--realizations"),
     Cli("reproduce-realizations-negative", ["reproduce", "--realizations", "-1", "--out", "{tmp}/r"], r"--realizations"),
     Cli("reproduce-seed-negative", ["reproduce", "--quick", "--seed", "-1", "--out", "{tmp}/r"], r"--seed"),
+    Cli("reproduce-backend-unknown", ["reproduce", "--quick", "--out", "{tmp}/r", "--backend", "gpu"],
+        r"--backend: invalid choice: 'gpu'"),
+    Cli("validity-backend-unknown", ["validity", "--quick", "--out", "{tmp}/v", "--backend", "gpu"],
+        r"--backend: invalid choice: 'gpu'"),
     Cli("reproduce-out-empty", ["reproduce", "--quick", "--out", " "], r"--out"),
     Cli("reproduce-out-file", ["reproduce", "--quick", "--out", "{tmp}/a-file"], r"--out.*file", files={"a-file": "x"}),
     Cli("reproduce-out-unwritable", ["reproduce", "--quick", "--out", UNWRITABLE], r"--out"),
@@ -129,6 +133,12 @@ CASES = [
     Api("reproduce-out-file", lambda t: (t / "f").write_text("x") and paper_reproduce.reproduce(
         t / "f", realizations=20, quick=True), r"out.*file"),
     Api("reproduce-seed-negative", lambda t: paper_reproduce.reproduce(t / "r", realizations=20, seed=-1), r"seed"),
+    Api("reproduce-backend-unknown", lambda t: paper_reproduce.reproduce(t / "r", quick=True, backend="gpu"),
+        r"backend must be one of \['cpu', .*'cuda'\]"),
+    Api("validity_map-backend-unknown", lambda t: paper_validity.validity_map(t / "v", backend="gpu"),
+        r"backend must be one of"),
+    Api("compare_distributions-backend-unknown", lambda t: paper_validity.compare_distributions(t / "d", backend="gpu"),
+        r"backend must be one of"),
 ]
 
 

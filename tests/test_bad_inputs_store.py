@@ -36,7 +36,7 @@ def _fake_store(tmp, family=None, **kw) -> Path:
 
     args = {**RUN, **kw}
     spec = EnsembleSpec(family or gc.RandomDecorated(4), args["realizations"], args.get("seed", 0), args["chains"],
-                        chunk_size=args["chunk_size"], pulse_window=args["pulse_window"])
+                        chunk_size=args["chunk_size"], pulse_window=args["pulse_window"], backend=args.get("backend"))
     path = tmp / "s.zarr"
     path.mkdir()
     (path / ".zgroup").write_text('{"zarr_format": 2}')
@@ -139,6 +139,15 @@ CASES = [
     Api("run-t-grid-decreasing", lambda tmp: _run(tmp, t_grid=[0.0, 1.0, 0.5]), r"t_grid must be .*increasing"),
     Api("run-lags-empty", lambda tmp: _run(tmp, lags=[]), r"lags must be a non-empty"),
     Api("run-pulse-window-unknown", lambda tmp: _run(tmp, pulse_window="half"), r"pulse_window must be 'auto'"),
+    # -- run_ensemble: the backend -------------------------------------------------------------------------
+    Api("run-backend-unknown", lambda tmp: _run(tmp, backend="gpu"), r"backend must be one of \['cpu', .*'cuda'\]"),
+    Api("run-backend-number", lambda tmp: _run(tmp, backend=1), r"backend must be one of .* or a granchain.backends.Backend"),
+    Api("run-backend-integrator-name", lambda tmp: _run(tmp, backend="dp5"), r"backend must be one of"),
+    Api("run-switch-backend-string", lambda tmp: _run(tmp, switch_backend="yes"), r"switch_backend must be True or False"),
+    Api("run-resume-other-backend", lambda tmp: _run(tmp, out=_fake_store(tmp), backend="numba"),
+        r"computed with the 'cpu' backend and this run asks for 'numba'.*switch_backend=True"),
+    Api("run-resume-store-of-another-backend", lambda tmp: _run(tmp, out=_fake_store(tmp, backend="numba")),
+        r"computed with the 'numba' backend and this run asks for 'cpu'.*backend='numba'"),
     # -- granchain ensemble ----------------------------------------------------------------------------
     *[Cli(f"ensemble-{flag[2:]}-{value}", ["ensemble", "--large", "4", flag, value, "--out", "{tmp}/s.zarr"], words)
       for flag, value, words in (
@@ -153,6 +162,10 @@ CASES = [
           ("--dt", "0", r"--dt must be a finite number > 0"),
           ("--dt", "nan", r"--dt must be a finite number > 0"),
           ("--t-end", "-1", r"--t-end must be a finite number > 0"))],
+    Cli("ensemble-backend-unknown", ["ensemble", "--large", "4", "--backend", "gpu", "--out", "{tmp}/s.zarr"],
+        r"--backend: invalid choice: 'gpu' \(choose from 'cpu', 'cuda'\)"),
+    Cli("ensemble-backend-missing-value", ["ensemble", "--large", "4", "--out", "{tmp}/s.zarr", "--backend"],
+        r"--backend: expected one argument"),
     Cli("ensemble-out-empty", ["ensemble", "--large", "4", "--out", ""], r"--out must be a path"),
     Cli("ensemble-out-missing", ["ensemble", "--large", "4"], r"--out"),
     Cli("ensemble-out-existing-file", ["ensemble", "--large", "4", "--out", "{tmp}/f.txt"], r"is an existing file, not a Zarr store",

@@ -1,12 +1,14 @@
 """Backends: what binds an integrator (a value: its settings and capabilities) and a chain (a value:
 masses, stiffnesses, contact law, boundaries, initial state) to code that runs them.
 
-Two backends today:
+Three backends today:
 
 - ``"numba"`` (:class:`~granchain.backends.numba_backend.NumbaBackend`): the compiled kernels of
   :mod:`granchain.backends.kernels` for DP5, RKN4 and Verlet, one chain or a parallel batch;
 - ``"scipy"`` (:class:`~granchain.backends.scipy_backend.ScipyBackend`): SciPy's DOP853, the
-  independent reference.
+  independent reference;
+- ``"cuda"`` (:class:`~granchain.backends.cuda.CudaBackend`): RKN4 for elastic chains on an NVIDIA GPU
+  (Numba's CUDA target), batches of thousands of chains at once.
 
 Every integrator names its backend (``Integrator.backend``); :func:`get_backend` returns it. Before a
 run the backend checks that the integrator's capabilities fit the chain's declared assumptions
@@ -25,7 +27,7 @@ import numpy as np
 
 from ..model.contacts import PowerLaw
 
-__all__ = ["Backend", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run", "final_energy_momentum"]
+__all__ = ["Backend", "BackendUnavailable", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run", "final_energy_momentum"]
 
 #: The slots of the ``info`` record every backend fills (defined with the kernels, in
 #: :mod:`granchain.backends.kernels.records`): offered here so that callers read a run's record through
@@ -80,6 +82,11 @@ def integrator_as_run(integrator, chain) -> dict:
     if ran is not integrator:
         record["goal_control"] = f"off: {getattr(chain, 'boundary', chain).why_no_goal_control}"
     return record
+
+
+class BackendUnavailable(RuntimeError):
+    """A backend that cannot run on this machine (no GPU, or its compiler not installed); the message says
+    what to install or which backend to use instead."""
 
 
 class Backend:
@@ -172,12 +179,15 @@ _BACKENDS: dict = {}
 
 
 def get_backend(name: str) -> Backend:
-    """The backend registered as ``name`` ("numba" or "scipy"), imported on first use."""
+    """The backend registered as ``name`` ("numba", "scipy" or "cuda"), imported on first use; "cuda" raises
+    :class:`BackendUnavailable` on a machine without a GPU or Numba's CUDA target."""
     if name not in _BACKENDS:
         if name == "numba":
             from .numba_backend import NumbaBackend as cls
         elif name == "scipy":
             from .scipy_backend import ScipyBackend as cls
+        elif name == "cuda":
+            from .cuda import CudaBackend as cls
         else:
             raise ValueError(f"unknown backend {name!r}; choose one of {sorted(BACKENDS)}")
         _BACKENDS[name] = cls()
@@ -185,4 +195,7 @@ def get_backend(name: str) -> Backend:
 
 
 #: The backends by name.
-BACKENDS = ("numba", "scipy")
+BACKENDS = ("numba", "scipy", "cuda")
+#: The backends that need hardware a machine may lack (an NVIDIA GPU): no integrator names them as its own;
+#: they run another backend's integrators when chosen (``backend="cuda"``).
+OPTIONAL_BACKENDS = ("cuda",)

@@ -85,6 +85,12 @@ def main(argv=None) -> int:
     except Exception as exc:  # noqa: BLE001 -- no raw tracebacks for users; GRANCHAIN_DEBUG=1 shows them
         import os
 
+        from ._backend import is_unavailable
+
+        if is_unavailable(exc):  # no GPU or no numba-cuda here: the user's choice to change, not a bug
+            print(f"granchain {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            return 2
+
         if os.environ.get("GRANCHAIN_DEBUG"):
             raise
         print(f"granchain {args.command}: error: {type(exc).__name__}: {exc}\n"

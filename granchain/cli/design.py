@@ -80,6 +80,9 @@ def add_parser(subparsers) -> None:
                         "beyond the budget, and can only improve the result)")
     p.add_argument("--no-figure", dest="figure", action="store_false", help="do not draw OUT/design.png")
     p.add_argument("--quiet", action="store_true", help="no progress report")
+    from ._backend import add_backend_arguments
+
+    add_backend_arguments(p)
     add_unit_arguments(p)
     p.set_defaults(func=run)
 
@@ -123,8 +126,10 @@ def _statistic(text: str):
 def run(args) -> int:
     from ..design import minimum_budget, optimize
     from ..design.preflight import output_directory
+    from ._backend import backend_of, check_usable
     from ._units import scale_from_args
 
+    check_usable(args)
     out = output_directory(args.out, "--out")  # checked before any work: a run's result must have somewhere to go
     units = scale_from_args(args, n=2.5)  # checked before any integration
     space = build_space(args)
@@ -132,7 +137,8 @@ def run(args) -> int:
     budget = args.budget if args.budget is not None else max(DEFAULT_BUDGET, minimum_budget(space, args.popsize, local))
     try:
         result = optimize(space, args.objective, budget=budget, seed=args.seed, popsize=args.popsize, local=local,
-                          statistic=_statistic(args.statistic), out=out, progress=not args.quiet, polish=args.polish)
+                          statistic=_statistic(args.statistic), out=out, progress=not args.quiet, polish=args.polish,
+                          backend=backend_of(args), switch_backend=args.switch_backend)
     except KeyboardInterrupt:
         print(f"granchain design: interrupted; the evaluations so far are saved in {args.out}. Run the same command again to "
               "continue.", file=sys.stderr)

@@ -81,7 +81,9 @@ def add_parser(subparsers) -> None:
                             "with (stores written with --error-control windowed before granchain 0.5). Without a trailing "
                             "window every granule is recorded on the whole grid")
     integ.add_argument("--step", type=float, default=None, help=f"time step ({', '.join(taking('dt'))}; default 1e-3)")
-    p.add_argument("--chunk-size", type=int, default=500, help="realisations per chunk, the unit of saving (default 500)")
+    p.add_argument("--chunk-size", type=int, default=None,
+                   help="realisations per chunk, the unit of saving (default: a store's own; else the backend's, 500 on "
+                        "the cpu, about 10000 on cuda)")
     p.add_argument("--t-end", type=float, default=None, help="end of the time grid of the averaged pulse (default: past the pulse's exit)")
     p.add_argument("--dt", type=float, default=0.1, help="spacing of the time grid of the averaged pulse (default 0.1)")
     p.add_argument("--out", required=True, help="Zarr store to write, e.g. runs/N26.zarr")
@@ -90,11 +92,13 @@ def add_parser(subparsers) -> None:
                         "finished chunks are verified, damaged ones recomputed, a larger --realizations extends it); "
                         "--no-resume refuses an existing store")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (e.g. tcp://10.0.0.5:8786) to run the chunks on")
-    p.add_argument("--threads", type=int, default=None, help="Numba threads for a local run (default: all cores)")
+    p.add_argument("--threads", type=int, default=None, help="Numba threads for a local run on the cpu (default: all cores)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors and warnings (no progress, no summary; failed integrations are reported on stderr)")
+    from ._backend import add_backend_arguments
     from ._contacts import add_contact_arguments
     from ._units import add_unit_arguments
 
+    add_backend_arguments(p)
     add_contact_arguments(p)
     add_unit_arguments(p)
     p.set_defaults(func=run)
@@ -245,9 +249,11 @@ def run(args) -> int:
     import numpy as np
 
     from ..ensembles.run import run_ensemble
+    from ._backend import backend_of, check_usable
     from ._units import scale_from_args
 
     check_arguments(args)
+    check_usable(args)
     units = scale_from_args(args)  # None without unit options; checked before integrating
     family = build_family(args, units)
     grid = family.default_time_grid(args.dt)
@@ -274,7 +280,8 @@ def run(args) -> int:
         ds = run_ensemble(
             family, realizations=args.realizations, seed=args.seed, chains=chains, integrator=integrator, t_grid=grid,
             chunk_size=args.chunk_size, out=args.out, resume=args.resume, client=client, progress=not args.quiet,
-            threads=args.threads, pulse_window=args.pulse_window,
+            threads=args.threads, pulse_window=args.pulse_window, backend=backend_of(args),
+            switch_backend=args.switch_backend,
         )
     except KeyboardInterrupt:
         print(f"granchain ensemble: interrupted; finished chunks are saved in {args.out}. "

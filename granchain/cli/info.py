@@ -10,7 +10,7 @@ import warnings
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "info",
-        help="describe an ensemble store: parameters, family, integrator, progress, failures, size, how to resume",
+        help="describe an ensemble store: parameters, family, integrator, backend, progress, failures, size, how to resume",
         description="Read an ensemble store written by `granchain ensemble` (or run_ensemble(out=...)) without changing it: "
                     "its parameters, progress, integration failures, size on disk, the writer holding it (if any), "
                     "a check of every finished chunk against its checksums, and the command that continues it. "
@@ -90,7 +90,9 @@ def summary(path: str) -> dict:
             "status_counts": status_counts, "size_bytes": _size(path), "lock": writing,
             # the writer's version is provenance (root attributes); records name it only before results_version
             "granchain_version": written_by, "results_version": params.get("results_version"),
-            "pulse_window": params.get("pulse_window")}
+            "pulse_window": params.get("pulse_window"),
+            # what computed it: "cpu" for every record that names no backend (all stores before the choice existed)
+            "backend": params.get("backend", "cpu"), "backends_used": params.get("backends_used")}
 
 
 def _integrator_lines(integ: dict, per_chain: dict | None) -> list:
@@ -119,6 +121,14 @@ def _pulse_window_line(window: dict | None) -> str:
                      f"whole grid for the last {whole}" if finite else f"{kind} chains: the whole grid")
     return (f"{'averaged':<12} <v_k(t)> in each granule's window, NaN after it (set from realisations "
             f"0..{window.get('pilot_realizations', 64) - 1}; --pulse-window full keeps the whole grid): " + "; ".join(parts))
+
+
+def _backend_line(backend: str, used: list | None) -> str:
+    """What computed the store: one backend, or (continued with --switch-backend) every one in order."""
+    if used and len(used) > 1:
+        return (f"{'backend':<12} {', then '.join(used)} (continued with --switch-backend: chunks of different backends "
+                f"agree per realisation within the accuracy contract, not bitwise)")
+    return f"{'backend':<12} {backend}" + ("" if backend == "cpu" else f" (continue it with --backend {backend})")
 
 
 def _contacts_line(family: dict) -> str:
@@ -151,6 +161,7 @@ def run(args) -> int:
         f"run          {info['realizations']} realisations, seed {info['seed']}, chains {', '.join(info['chains'])}, "
         f"chunks of {info['chunk_size']}",
         _pulse_window_line(info.get("pulse_window")),
+        _backend_line(info["backend"], info.get("backends_used")),
         f"progress     {info['chunks_done']}/{info['chunks']} chunks done ({info['realizations_done']} realisations)"
         + (": complete" if info["complete"] else ""),
     ]

@@ -20,13 +20,19 @@ def add_parser(subparsers) -> None:
     p.add_argument("--seed", type=int, default=2026, help="base seed (chain length N uses 1000*seed + N)")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler to run the ensembles on")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    from ._backend import add_backend_arguments
+
+    add_backend_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..paper.reproduce import MIN_REALIZATIONS, reproduce
     from ..paper.validity import output_directory
+    from ._backend import backend_of, check_usable
     from .ensemble import connect
+
+    check_usable(args)
 
     if args.realizations < MIN_REALIZATIONS:
         raise ValueError(f"--realizations must be >= {MIN_REALIZATIONS} for the report's statistics, got {args.realizations} "
@@ -36,7 +42,8 @@ def run(args) -> int:
     output_directory(args.out, "--out")
     client = connect(args.scheduler)
     try:
-        reproduce(args.out, args.realizations, quick=args.quick, seed=args.seed, client=client, progress=not args.quiet)
+        reproduce(args.out, args.realizations, quick=args.quick, seed=args.seed, client=client, progress=not args.quiet,
+                  backend=backend_of(args), switch_backend=args.switch_backend)
     finally:
         if client is not None:
             client.close()

@@ -40,6 +40,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--blocks", type=int, default=10, help="jackknife blocks = chunks per point (default 10)")
     p.add_argument("--distributions", action="store_true", help="also compare non-uniform distributions on [0.01, 0.4]")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from ._backend import add_backend_arguments
+
+    add_backend_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -52,6 +55,10 @@ def run(args) -> int:
     from ..paper import validity
     from ..paper.figures import save
     from ..paper.figures import validity as figure
+    from ._backend import backend_of, check_usable
+
+    check_usable(args)
+    on = {"backend": backend_of(args), "switch_backend": args.switch_backend}
 
     base = dict(validity.QUICK) if args.quick else {"alphas": validity.DEFAULT_ALPHAS, "betas": validity.DEFAULT_BETAS,
                                                     "n_large": (6, 26), "realizations": validity.DEFAULT_REALIZATIONS}
@@ -61,14 +68,14 @@ def run(args) -> int:
     out = validity.output_directory(args.out, "--out", create=False)  # refused before the map starts
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
-    ds = figure.compute(out, seed=args.seed, blocks=args.blocks, progress=not args.no_progress, **base)
+    ds = figure.compute(out, seed=args.seed, blocks=args.blocks, progress=not args.no_progress, **on, **base)
     fig = figure.plot(ds)
     paths = save(fig, out / "validity")
     plt.close(fig)
     dist = None
     if args.distributions:
         dist = validity.compare_distributions(out, n_large=base["n_large"], realizations=base["realizations"], seed=args.seed,
-                                              blocks=args.blocks, progress=not args.no_progress)
+                                              blocks=args.blocks, progress=not args.no_progress, **on)
     text = validity.report_section(ds, dist)
     (out / "validity.md").write_text(text + "\n")
     print(text)

@@ -42,8 +42,10 @@ class Evaluation:
     failed: np.ndarray
 
 
-def run_rows(batch, integrator, contacts) -> dict:
-    """Integrate every row of ``batch`` with the compiled batch kernel; the per-row outputs by name."""
+def run_rows(batch, integrator, contacts, backend=None) -> dict:
+    """Integrate every row of ``batch`` with the compiled batch kernel; the per-row outputs by name.
+    ``backend``: None, the integrator's own backend; a backend's name ("cuda") or a
+    ``granchain.backends.Backend``: that backend's ``integrate_batch``, with the same arguments."""
     # Writable C-contiguous copies: a chain's frozen (read-only) arrays would make Numba compile the
     # kernel once more for read-only arguments (a minute), for no gain.
     masses = np.array(batch.masses, dtype=float, order="C")
@@ -60,8 +62,14 @@ def run_rows(batch, integrator, contacts) -> dict:
            "sum_v": np.zeros((1, K), dtype=np.int64), "sum_v2": np.zeros((1, K), dtype=np.int64),
            "sum_wall": np.zeros(1, dtype=np.int64), "n_valid": np.zeros(1, dtype=np.int64), "lags": None}
     t_max = time_limit(masses.shape[1], float(v0.min()), batch.n)
-    integrator.integrate_batch(masses, stiffness, batch.n, v0, observed, contacts, t_grid=t_grid, t_max=t_max,
-                               controls=RunControls(), scale=1.0, out=out)
+    if backend is None:
+        integrator.integrate_batch(masses, stiffness, batch.n, v0, observed, contacts, t_grid=t_grid, t_max=t_max,
+                                   controls=RunControls(), scale=1.0, out=out)
+    else:
+        from ..ensembles import backend as _backend
+
+        _backend.resolve(backend).integrate_batch(integrator, masses, stiffness, batch.n, v0, observed, contacts,
+                                                  t_grid=t_grid, t_max=t_max, controls=RunControls(), scale=1.0, out=out)
     return out
 
 
@@ -77,13 +85,14 @@ def _history_value(chain, objective: Objective, integrator) -> float:
     return objective.from_result(res) if res.ok else float("nan")
 
 
-def evaluate_chains(batch, objective: Objective, integrator) -> tuple:
-    """(values (R,), ok (R,)) of every row of ``batch`` for ``objective``: through the batch kernel, or
-    row by row with simulate for a history objective."""
+def evaluate_chains(batch, objective: Objective, integrator, backend=None) -> tuple:
+    """(values (R,), ok (R,)) of every row of ``batch`` for ``objective``: through the batch kernel (on
+    ``backend``, :func:`run_rows`), or row by row with simulate for a history objective (on the CPU: one
+    chain's wall force on a fine grid is no work for a GPU)."""
     wall = bool(np.isinf(batch.masses[0, -1]))
     objective.check(wall)
     if objective.route(wall) == "rows":
-        rows = run_rows(batch, integrator, objective.contacts(batch.masses.shape[1] - int(wall)))
+        rows = run_rows(batch, integrator, objective.contacts(batch.masses.shape[1] - int(wall)), backend)
         ok = rows["status"] == 0
         values = np.where(ok, objective.from_rows(rows, batch), np.nan)
         return values, ok
@@ -136,10 +145,16 @@ class BatchEvaluator:
     (:func:`granchain.ensemble_integrator`); ``statistic``: "mean" or a quantile, for random spaces;
     ``client``: a ``dask.distributed.Client`` (one batch per worker); ``workers``: a map-like callable
     ``workers(func, parts)`` (or a Dask client), ``parts`` the generation split into ``parts`` batches
-    (default: as many as this machine has cores)."""
+    (default: as many as this machine has cores); ``backend``: None or "cpu" (default), the integrator's own
+    backend; "cuda" (or a ``granchain.backends.Backend``): a generation's rows on that backend, recorded
+    in :meth:`describe` (two backends agree within the accuracy contract, not bitwise)."""
 
     def __init__(self, space, objective, *, integrator=None, statistic="mean", client=None, workers=None,
-                 parts: int | None = None):
+                 parts: int | None = None, backend=None):
+        from ..ensembles import backend as _backend
+
+        self.backend = _backend.checked(backend)
+        _backend.resolve(self.backend)  # a GPU where none is usable: refused before the first generation
         if workers is not None and hasattr(workers, "scheduler_info") and hasattr(workers, "gather"):
             client, workers = (workers if client is None else client), None  # a Dask client given as workers
         if workers is not None and not callable(workers):
@@ -159,7 +174,11 @@ class BatchEvaluator:
         self.client = client
 
     def describe(self) -> dict:
-        return {"integrator": self.integrator.describe(), "statistic": self.statistic}
+        from ..ensembles import backend as _backend
+
+        # the backend only when it is not the CPU default: the records of earlier runs stay as they were
+        return {"integrator": self.integrator.describe(), "statistic": self.statistic,
+                **({} if self.backend is None else {"backend": _backend.name_of(self.backend)})}
 
     def __call__(self, X) -> Evaluation:
         X = self.space.as_array(X)
@@ -171,21 +190,23 @@ class BatchEvaluator:
 
             k = min(self.parts or os.cpu_count() or 2, X.shape[0])
             parts = [p for p in np.array_split(X, k) if p.size]
-            results = list(self.workers(partial(_evaluate, self.space, self.objective, self.integrator, self.statistic), parts))
+            results = list(self.workers(partial(_evaluate, self.space, self.objective, self.integrator, self.statistic,
+                                                backend=self.backend), parts))
             if results and not isinstance(results[0], Evaluation) and hasattr(results[0], "result"):
                 results = [r.result() for r in results]  # futures (a Dask client's map)
             return Evaluation(*(np.concatenate([getattr(r, f) for r in results]) for f in ("value", "stderr", "failed")))
         if self.client is None or X.shape[0] < 2:
-            return _evaluate(self.space, self.objective, self.integrator, self.statistic, X)
+            return _evaluate(self.space, self.objective, self.integrator, self.statistic, X, self.backend)
         workers = max(1, len(self.client.scheduler_info().get("workers", {})))
         parts = [p for p in np.array_split(X, min(workers, X.shape[0])) if p.size]
         futures = self.client.map(_evaluate, [self.space] * len(parts), [self.objective] * len(parts),
-                                  [self.integrator] * len(parts), [self.statistic] * len(parts), parts, pure=False)
+                                  [self.integrator] * len(parts), [self.statistic] * len(parts), parts,
+                                  [self.backend] * len(parts), pure=False)
         results = self.client.gather(futures)
         return Evaluation(*(np.concatenate([getattr(r, f) for r in results]) for f in ("value", "stderr", "failed")))
 
 
-def _evaluate(space, objective, integrator, statistic, X) -> Evaluation:
+def _evaluate(space, objective, integrator, statistic, X, backend=None) -> Evaluation:
     """The values of designs X (a top-level function, so that Dask can ship it)."""
     P = X.shape[0]
     feasible = space.violation(X) <= 0.0
@@ -193,7 +214,7 @@ def _evaluate(space, objective, integrator, statistic, X) -> Evaluation:
     if not feasible.any():
         return Evaluation(value, stderr, failed)
     Xf = X[feasible]
-    values, ok = evaluate_chains(space.batch(Xf), objective, integrator)
+    values, ok = evaluate_chains(space.batch(Xf), objective, integrator, backend)
     R = space.realizations
     values, ok = values.reshape(Xf.shape[0], R), ok.reshape(Xf.shape[0], R)
     idx = np.flatnonzero(feasible)

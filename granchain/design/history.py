@@ -54,11 +54,16 @@ class History:
         import zarr  # the history is no ensemble store (granchain.open_store reads those): its arrays directly
 
         group = zarr.open_group(self.path, mode="r")
-        old = json.loads(group.attrs.get(_RECORD, "{}"))
-        if old != json.loads(json.dumps(self.record)):
-            diff = sorted(k for k in set(old) | set(self.record) if old.get(k) != json.loads(json.dumps(self.record)).get(k))
+        # (the backends used are the run's history, checked by optimize: a run continued on another one adds its own)
+        stored = json.loads(group.attrs.get(_RECORD, "{}"))
+        old = {k: v for k, v in stored.items() if k != "backends_used"}
+        new = {k: v for k, v in json.loads(json.dumps(self.record)).items() if k != "backends_used"}
+        if old != new:
+            diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
             raise ValueError(f"{self.path} holds a design run with other arguments (they differ in {diff}); start it with the "
                              "same arguments to continue it, or choose another directory")
+        if stored.get("backends_used") != self.record.get("backends_used"):  # recorded now, new evaluations or not
+            zarr.open_group(self.path, mode="r+").attrs[_RECORD] = json.dumps(self.record)
         done = int(group.attrs.get("evaluations_done", 0))
         x = np.asarray(group["params"][:done], dtype=float)
         for row, v, s, f in zip(x, group["value"][:done], group["stderr"][:done], group["failed"][:done]):
@@ -112,7 +117,7 @@ class History:
                     arr.resize((self.written,) + arr.shape[1:])
             new.to_zarr(self.path, append_dim="evaluation", consolidated=False)
         self.written = self.x.shape[0]
-        zarr.open_group(self.path, mode="r+").attrs["evaluations_done"] = self.written
+        zarr.open_group(self.path, mode="r+").attrs.update({"evaluations_done": self.written, _RECORD: json.dumps(self.record)})
 
     # -- evaluations ----------------------------------------------------------------------
     def lookup(self, X: np.ndarray):

@@ -124,7 +124,8 @@ class _Progress:
 
 def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int = 10, local: str | None = "powell",
              statistic="mean", integrator=None, out=None, resume: bool = True, client=None, workers=None, progress: bool = False,
-             mutation=(0.5, 1.0), recombination: float = 0.7, polish: bool = True) -> DesignResult:
+             mutation=(0.5, 1.0), recombination: float = 0.7, polish: bool = True, backend=None,
+             switch_backend: bool = False) -> DesignResult:
     """Search ``space`` for the design that does best for ``objective`` within ``budget`` evaluations; the
     result says how sure it is (:attr:`DesignResult.convergence`: a search that stops at its budget has
     found the best design it evaluated, not a proven optimum).
@@ -175,6 +176,14 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
         For a space of one or two real parameters: a last bounded local search from the best design
         (``_polish``, at most ``POLISH_EVALUATIONS`` evaluations on top of the budget), which can
         only improve the result. Its change is reported in :attr:`DesignResult.convergence`.
+    backend : str, optional
+        What integrates the generations: None or "cpu" (default), the integrator's own backend; "cuda", an
+        NVIDIA GPU (``pip install granchain[cuda]``). Recorded with the run when not "cpu"; a run in ``out``
+        is continued on the backend that computed it.
+    switch_backend : bool
+        Continue a run in ``out`` that another backend computed (its values then come from two backends,
+        within the accuracy contract, not bitwise); the record keeps ``"backend"`` (the first) and adds
+        ``"backends_used"`` in the order first used. False: such a run is refused, naming both.
     """
 
     from .preflight import check_feasible, check_size, output_directory
@@ -183,7 +192,10 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
         raise ValueError(f"space must be a granchain.design space (TaperedSpace, DecoratedSpace, BinarySpace, "
                          f"RandomDecoratedSpace or FunctionSpace), got {space!r}")
     check_size(space)  # before the evaluator: a sensor objective asks the chains' size
-    evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client, workers=workers)
+    if not isinstance(switch_backend, (bool, np.bool_)):
+        raise ValueError(f"switch_backend must be True or False, got {switch_backend!r}")
+    evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client, workers=workers,
+                               backend=backend)
     objective = evaluator.objective
     popsize = count("popsize", popsize, minimum=2)
     seed = count("seed", seed, minimum=0)
@@ -213,6 +225,8 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
     check_feasible(space)  # a request no design can meet is refused here, not after a run of NaNs
     if out is not None:
         out = output_directory(out)
+        if resume:
+            record = _continued_backends(osp.join(out, "history.zarr"), record, evaluator, switch_backend)
         makedirs(out, exist_ok=True)
         # One run at a time per directory (a run started again while the interrupted one is still ending,
         # or twice): the ensembles' store lock, on the history (a ValueError naming the holder's PID),
@@ -229,6 +243,30 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
                         mutation=mutation, recombination=recombination, polish=polish)
         except _EvaluationError as exc:
             raise exc.error from exc.__cause__
+
+
+def _continued_backends(path, record: dict, evaluator, switch: bool) -> dict:
+    """``record`` for a run continuing the history at ``path`` (if any) on the evaluator's backend: refused
+    when another backend computed it, unless ``switch``; then with the backends used so far and this one
+    (:mod:`granchain.ensembles.backend`, the rules of the ensemble stores)."""
+    import json
+    import os
+
+    from ..ensembles import backend as _backend
+
+    if not os.path.isdir(path):
+        return record
+    try:
+        import zarr
+
+        stored = json.loads(zarr.open_group(path, mode="r").attrs.get("granchain_design", "{}"))
+    except Exception:  # noqa: BLE001 -- an unreadable history: the History's own check says what is wrong
+        return record
+    used = _backend.check_same_backend(path, stored, _backend.name_of(evaluator.backend), bool(switch))
+    if used is None:
+        return record
+    record = {k: v for k, v in record.items() if k != "backend"}
+    return {**record, **({} if used[0] == _backend.CPU else {"backend": used[0]}), "backends_used": list(used)}
 
 
 def _run(space, objective, evaluator, record, *, budget, seed, popsize, local, maxiter, snap_budget, out, resume, progress,

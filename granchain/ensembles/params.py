@@ -55,6 +55,8 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
                          "or extended; write a new store (the same family, seed and integrator=granchain.DP5(1e-6, 1e-9) "
                          "reproduce its realisations bitwise)")
     old = json.loads(json.dumps(current_record(old), sort_keys=True))  # an earlier version's record, in today's form
+    _check_backends(path, old, new)
+    old.pop("backends_used", None), new.pop("backends_used", None)  # the run's history, checked just above
     stored_r = old.get("realizations")
     if extend and isinstance(stored_r, int) and stored_r <= new["realizations"]:
         old = {**old, "realizations": new["realizations"]}
@@ -75,6 +77,18 @@ def check_same_parameters(path, stored: str | None, spec, extend: bool = False) 
         raise ValueError(f"{path} was written with {what} ({diff}){hint}; "
                          "results are never mixed: use another path, or the stored parameters to resume")
     return int(stored_r)
+
+
+def _check_backends(path, old: dict, new: dict) -> None:
+    """Refuse a run whose backend did not compute the store, unless it comes with ``switch_backend`` (its
+    record then lists the store's backends and its own after them: :mod:`granchain.ensembles.backend`),
+    naming both backends rather than a difference of records."""
+    from .backend import other_backend, stored_backends
+
+    was, now = stored_backends(old), stored_backends(new)
+    if now == was or (now[:len(was)] == was and len(now) == len(was) + 1):
+        return
+    raise other_backend(path, was, now[-1])
 
 
 #: The family fields that are its contacts (the law, its exponent, the static load, the striker, the wall).

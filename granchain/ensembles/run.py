@@ -27,6 +27,7 @@ from ..families import ChainFamily, RandomDecorated
 from ..model.chain import HERTZ
 from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
 from ..solve.simulation import linear_crossing_time, time_limit
+from . import backend as _backend
 from . import pulse_window as _window
 from .pulse_window import AUTO, FULL
 from .store import WALL, MemorySink, Variable, ZarrSink, _check_out, check_same_family
@@ -135,7 +136,8 @@ class EnsembleSpec:
     chains: tuple = ("both",)
     integrator: Integrator | None = None
     t_grid: np.ndarray = field(default=None, repr=False)
-    chunk_size: int = 500
+    #: Realisations per chunk; None: the backend's ``default_chunk_size`` (500 on the CPU).
+    chunk_size: int | None = None
     controls: RunControls = field(default_factory=RunControls)
     lags: np.ndarray = field(default=None, repr=False)
     #: {chain kind: Integrator}; filled from ``integrator`` (one for all kinds) or, without one, from
@@ -147,6 +149,12 @@ class EnsembleSpec:
     pulse_window: str = "auto"
     #: {chain kind: window ends (K,)} once set (``pulse_window.window_ends``, or a store's record); None before.
     pulse_ends: dict | None = field(default=None, repr=False)
+    #: What computes the chunks: None (or "cpu"): each integrator's own backend; a backend's name ("cuda",
+    #: "numba") or a ``granchain.backends.Backend``: its ``integrate_batch`` (:mod:`granchain.ensembles.backend`).
+    backend: object = None
+    #: Every backend that computed the store's chunks, in the order first used (``run_ensemble(
+    #: switch_backend=True)``; the record's ``"backend"`` is the first); None: ``backend`` alone.
+    backends_used: tuple | None = None
 
     def __post_init__(self):
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
@@ -184,9 +192,16 @@ class EnsembleSpec:
         else:
             given = self.integrator
             conservative = self.family.contact_law.conservative
+            windowed = self.pulse_window == AUTO
             per_chain = {c: (get_integrator(given) if given is not None
-                             else ensemble_integrator(c, conservative=conservative, windowed=self.pulse_window == AUTO))
+                             else ensemble_integrator(c, conservative=conservative, windowed=windowed))
                          for c in self.chains}
+            # A backend that runs fewer methods (the GPU: RKN4 alone) gets the decorated chains' default,
+            # RKN4, for the kinds whose default it has no kernel for: valid for every elastic chain.
+            methods = getattr(_backend.resolve(_backend.checked(self.backend)), "methods", None)
+            if given is None and methods is not None:
+                fallback = ensemble_integrator("decorated", conservative=conservative, windowed=windowed)
+                per_chain = {c: (i if i.name in methods else fallback) for c, i in per_chain.items()}
         law = self.family.contact_law
         for c, integ in per_chain.items():  # refused here, before a store exists
             if integ.needs_conservative_forces and not law.conservative:
@@ -201,6 +216,15 @@ class EnsembleSpec:
         grid.setflags(write=False)
         set_("t_grid", grid)
         set_("pulse_ends", self._checked_pulse_ends())
+        set_("backend", _backend.checked(self.backend))
+        if self.backends_used is not None:
+            used = tuple(self.backends_used) if isinstance(self.backends_used, (tuple, list)) else ()
+            if not used or not all(isinstance(u, str) and u for u in used):
+                raise ValueError(f"backends_used must list the names of the backends that computed the store, in the "
+                                 f"order first used (e.g. ('cpu', 'cuda')), got {self.backends_used!r}")
+            set_("backends_used", used)
+        if self.chunk_size is None:
+            set_("chunk_size", _backend.default_chunk_size(self.backend))
         set_("chunk_size", count("chunk_size", self.chunk_size, minimum=1))
         if not isinstance(self.controls, RunControls):
             raise ValueError(f"controls must be a granchain.RunControls, got {self.controls!r}")
@@ -271,6 +295,11 @@ class EnsembleSpec:
             "max_steps": self.controls.max_steps,
             "results_version": RESULTS_VERSION,  # not the package version: an upgrade that computes the same numbers resumes
         }
+        used = list(self.backends_used or (_backend.name_of(self.backend),))
+        if used[0] != _backend.CPU:  # only then: a store of the CPU default keeps the record of earlier versions
+            record["backend"] = used[0]
+        if len(used) > 1:  # the run's history (not compared on resume, not in the checksums' key)
+            record["backends_used"] = used
         if self.has_pulse_windows:  # only then: a run without windows keeps the record of earlier versions
             record["pulse_window"] = _window.record(self)
         if self.lags is not None:  # only then: stores without the aligned pulse keep their 0.1/0.2 record
@@ -286,7 +315,15 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_pro
     A top-level function so that Dask can ship it to workers. ``on_progress(k)`` (local runs) is
     called after every batch of k realisations; the batches are an implementation detail that does
     not change any result (per-realisation results are independent, and the sums are integers).
+    A backend that does not run on Numba's threads (a GPU: :func:`granchain.ensembles.backend.runs_on_cpu`)
+    gets the whole chunk in one call, its progress reported once per chunk, and Numba's thread count is
+    left alone: a GPU fills its cores only with thousands of chains per launch.
     """
+    if not _backend.runs_on_cpu(spec.backend):
+        res = _compute_chunk(spec, j)
+        if on_progress is not None:
+            on_progress(res["realizations"])
+        return res
     import numba
 
     previous = numba.get_num_threads()
@@ -418,7 +455,8 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
             rows = [time_limit(masses.shape[1], float(v), batch.n) for v in v0]
             crossing = linear_crossing_time(masses, stiffness, batch.n, family.static_force)
             t_max = np.maximum(np.minimum(rows, 2.0 * crossing + 20.0), float(spec.t_grid[-1]))
-        spec.chain_integrators[name].integrate_batch(
+        integrate = _integrate_batch(spec, name)
+        integrate(
             masses, stiffness, batch.n, v0,
             np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),
             t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale,
@@ -433,6 +471,16 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
     for v in progress_sum_variables(spec):
         out[v.name] = _store_layout(buffers[v.name], v)
     return out
+
+
+def _integrate_batch(spec: EnsembleSpec, kind: str):
+    """``integrate_batch(masses, ...)`` of the chain kind ``kind``: its integrator's own (the CPU default), or
+    the chosen backend's with the integrator first (the same arguments either way)."""
+    integrator = spec.chain_integrators[kind]
+    backend = _backend.resolve(spec.backend)
+    if backend is None:
+        return integrator.integrate_batch
+    return lambda *args, **kwargs: backend.integrate_batch(integrator, *args, **kwargs)
 
 
 def _dask_chunk(spec: EnsembleSpec, j: int) -> dict:
@@ -507,10 +555,10 @@ def stored_integrators(out):
 
 def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: int = 0, chains="both", *,
                  integrator=None, n: float = HERTZ, rtol: float | None = None, atol: float | None = None, t_grid=None,
-                 chunk_size: int = 500, out=None, resume: bool = True, client=None, progress: bool = True,
+                 chunk_size: int | None = None, out=None, resume: bool = True, client=None, progress: bool = True,
                  momentum_conserving: bool = False, exit_margin: float = 3.0, peak_rtol: float = 1e-6,
                  max_steps: int = 20_000_000, threads: int | None = None, n_large: int | None = None, lags=None,
-                 pulse_window: str | None = None):
+                 pulse_window: str | None = None, backend=None, switch_backend: bool = False):
     """Integrate ``realizations`` random chains of a family, with any registered integrator.
 
     Parameters
@@ -544,8 +592,10 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         realisation in Python (slow).
     t_grid : array, optional
         Times of the averaged pulse <v_k(t)> (default: the family's ``default_time_grid()``).
-    chunk_size : int
-        Realisations per chunk: the unit of work, of saving and of resuming.
+    chunk_size : int, optional
+        Realisations per chunk: the unit of work, of saving and of resuming. Default: when ``out`` is an
+        existing store, the chunk size it was started with; else the backend's ``default_chunk_size``
+        (500 on the CPU; a GPU asks for about 10,000, the chains it needs per launch to fill its cores).
     out : path, optional
         Zarr store to write (and resume). Without it the results stay in memory.
     resume : bool
@@ -561,7 +611,20 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     exit_margin, peak_rtol, max_steps
         Run controls, as in :func:`granchain.simulate` (:class:`granchain.RunControls`).
     threads : int, optional
-        Numba threads for local runs, 1 .. the cores Numba can use (default: all cores).
+        Numba threads for local runs on the CPU, 1 .. the cores Numba can use (default: all cores).
+    backend : str or granchain.backends.Backend, optional
+        What computes the chunks. None or "cpu" (default): each integrator on its own backend (the Numba
+        kernels, SciPy for DOP853). "cuda": an NVIDIA GPU (``pip install granchain[cuda]``; refused with
+        ``granchain.backends.BackendUnavailable`` where numba-cuda or a GPU is missing), one kernel launch
+        per chunk; "numba", or a ``Backend`` instance: that backend's ``integrate_batch`` for every chain
+        kind. Results of two backends agree per realisation within the accuracy contract, not bitwise, so
+        the store records a backend other than "cpu" (``"backend"`` in its parameter record; ``granchain
+        info`` shows it) and is continued on the backend that computed it.
+    switch_backend : bool
+        Continue (or extend) a store computed on another backend than ``backend``: its chunks then come
+        from two backends (per realisation within the accuracy contract, not bitwise). The record keeps
+        ``"backend"``, the one the store was started with, and adds ``"backends_used"``, every backend
+        that computed chunks in the order first used. False (default): such a run is refused, naming both.
     lags : array, optional
         Also accumulate the *aligned* pulse <v_k(t_k^peak + tau)> on these lags tau (times relative
         to each realisation's own peak time at k; variables ``aligned_velocity``,
@@ -593,8 +656,18 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     if out is not None:
         out = _check_out(out, create=False)  # a path that can be a store, or what to change (nothing made yet)
     continuing = out is not None and resume is True
+    chosen = _backend.checked(backend)
+    _backend.resolve(chosen)  # a GPU backend where none is usable is refused here, before any store is touched
+    if not isinstance(switch_backend, (bool, np.bool_)):
+        raise ValueError(f"switch_backend must be True or False, got {switch_backend!r}")
+    used = None
     if continuing:  # other contact settings are named before the store's integrators (for its own law) are taken
         check_same_family(out, fam)
+        record = _window.stored_record(out)
+        if record is not None:  # a store is continued on its backend (or with switch_backend) and in its chunks
+            used = _backend.check_same_backend(out, record, _backend.name_of(chosen), bool(switch_backend))
+            if chunk_size is None and isinstance(record.get("chunk_size"), int):
+                chunk_size = record["chunk_size"]
     if pulse_window is None:  # a store is continued as it was started; a new run gets the windows
         pulse_window = _window.stored_setting(out) if continuing else AUTO
     if integrator is None and rtol is None and atol is None and continuing:
@@ -603,7 +676,7 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     per_chain = integ if isinstance(integ, dict) else None
     spec = EnsembleSpec(fam, realizations, seed, chains, None if per_chain else integ, t_grid, chunk_size,
                         RunControls(exit_margin, max_steps, peak_rtol), lags, chain_integrators=per_chain,
-                        pulse_window=pulse_window)
+                        pulse_window=pulse_window, backend=chosen, backends_used=used)
     threads = _threads(threads)
     if not isinstance(resume, (bool, np.bool_)):
         raise ValueError(f"resume must be True or False, got {resume!r}")
@@ -658,7 +731,7 @@ def _compile_ahead(spec: EnsembleSpec, client):
     integrates the paper's chains with another method first and DP5 later (the defaults: RKN4 for the
     decorated chains, then DP5 for the effective ones), so that a first run compiles the two on two
     cores; None otherwise, and with a cluster, whose workers compile for themselves."""
-    if client is not None or spec.family.model() is not None:
+    if client is not None or spec.family.model() is not None or spec.backend is not None:
         return None
     first, *later = (spec.chain_integrators[c].name for c in spec.chains)  # (RKN4 is a subclass of DP5)
     if first == DP5.name or DP5.name not in later:

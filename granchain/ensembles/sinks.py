@@ -16,6 +16,7 @@ import numpy as np
 
 from .._version import __version__
 from . import verify as _verify
+from .backend import name_of, stored_backends
 from .files import _atomic_write, _check_out, _read_json, _short
 from .layout import chunk_dataset, empty_dataset, finalize, progress_dataset
 from .params import check_same_parameters, stored_parameters
@@ -207,7 +208,10 @@ class ZarrSink:
                     f"trusted: delete it (rm -r {path}) and run again")
             raise ValueError(f"{path} exists but is not a granchain ensemble store; choose another path")
         old_realizations = check_same_parameters(path, stored, self.spec, extend=True)
-        old = dataclasses.replace(self.spec, realizations=old_realizations)
+        # the store as it is: its realisations, and the backends that computed it (a run accepted with
+        # switch_backend adds its own to the record below, not as a repair of damaged metadata)
+        stored_used = stored_backends(json.loads(stored))
+        old = dataclasses.replace(self.spec, realizations=old_realizations, backends_used=tuple(stored_used))
         if old.fixed_point_bits != self.spec.fixed_point_bits:
             raise ValueError(
                 f"{path} holds {old_realizations} realisations summed with {old.fixed_point_bits} fixed-point bits; "
@@ -219,14 +223,25 @@ class ZarrSink:
         bad = self._verify(old, accept_unbound=unbound)
         if bad:
             self._mark_undone(bad)
+        now_used = self.spec.backends_used or (name_of(self.spec.backend),)
+        if tuple(stored_used) != tuple(now_used):
+            name = name_of(self.spec.backend)
+            self.log(f"continuing {path} on the {name} backend (switch_backend): its chunks so far were computed with "
+                     f"{', '.join(stored_used)}")
+            old = dataclasses.replace(old, backends_used=tuple(now_used))
+            self._repair_metadata(old, warn=False, note=f"continued on the {name} backend (switch_backend: per-realisation "
+                                                        f"results of the backends agree within the accuracy contract, not "
+                                                        f"bitwise)")
         if old_realizations < self.spec.realizations:
             self._extend(old)
         import zarr
 
         zarr.consolidate_metadata(path, zarr_format=2)
 
-    def _repair_metadata(self, spec, warn: bool):
-        """Restore every metadata document (and coordinate) that differs from a fresh store's for ``spec``."""
+    def _repair_metadata(self, spec, warn: bool, note: str | None = None):
+        """Restore every metadata document (and coordinate) that differs from a fresh store's for ``spec``.
+        Without ``warn`` (the store grows, or changes backend) the history gains a line: ``note``, or that it
+        was extended to ``spec.realizations``."""
         import zarr
 
         reference, coords = _reference_metadata(spec)
@@ -245,8 +260,8 @@ class ZarrSink:
                 want[_verify.AVERAGED_DIGESTS] = keep[_verify.AVERAGED_DIGESTS]  # until finalize writes them anew
             if key in (".zattrs", "progress/.zattrs") and not warn and "history" in want:
                 want["history"] = (keep.get("history", want["history"]) + "\n" +
-                                   f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} extended to "
-                                   f"{spec.realizations} realisations by granchain {__version__}")
+                                   f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} "
+                                   f"{note or f'extended to {spec.realizations} realisations'} by granchain {__version__}")
             file = os.path.join(self.path, *key.split("/"))
             have = _read_json(file)
             if have == want:

@@ -69,10 +69,11 @@ def _canonical(record) -> bytes:
 
 def store_identity(record_text: str) -> bytes:
     """The key of a store's checksums: BLAKE2b-256 of its parameter record (JSON text as stored) without
-    ``realizations``, so that an extended store keeps its identity."""
+    ``realizations`` and ``backends_used``, so that a store keeps its identity when it is extended or
+    continued on another backend (``run_ensemble(switch_backend=True)``)."""
     record = json.loads(record_text)
     if isinstance(record, dict):
-        record = {k: v for k, v in record.items() if k != "realizations"}
+        record = {k: v for k, v in record.items() if k not in ("realizations", "backends_used")}
     return hashlib.blake2b(_canonical(record), digest_size=32).digest()
 
 

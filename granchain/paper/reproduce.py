@@ -34,17 +34,24 @@ def ensemble_path(out: Path, N: int) -> Path:
 
 
 def run_ensembles(out: Path, realizations: int, seed: int, Ns=PAPER_N, alpha=0.01, beta=0.4, client=None, progress=True,
-                  chunk_size=None, log=print) -> dict:
-    """One resumable ensemble per chain length; chain length N uses seed ``1000 * seed + N``."""
+                  chunk_size=None, log=print, backend=None, switch_backend: bool = False) -> dict:
+    """One resumable ensemble per chain length; chain length N uses seed ``1000 * seed + N``. ``backend``,
+    ``switch_backend``: as :func:`granchain.run_ensemble`'s. The chunks are an eighth of the realisations
+    (the report's jackknife errors take one block per chunk), at most 1000 on the CPU (a chunk of a few
+    seconds saves often); a GPU takes the eighth whole, its launches as full as the blocks allow."""
+    from ..ensembles import backend as _backend
+
     dist = Uniform(alpha, beta)
+    on_cpu = _backend.runs_on_cpu(_backend.checked(backend))
     datasets = {}
     for i, N in enumerate(Ns, 1):
         path = ensemble_path(out, N)
         path.parent.mkdir(parents=True, exist_ok=True)
         log(f"[ensemble {i}/{len(Ns)}] N = {N}: {realizations} realisations, decorated + effective -> {path}")
-        cs = chunk_size or max(50, min(1000, -(-realizations // 8)))
+        cs = chunk_size or max(50, min(1000 if on_cpu else realizations, -(-realizations // 8)))
         datasets[N] = run_ensemble(N, dist, realizations, 1000 * seed + N, "both", t_grid=default_time_grid(N),
-                                   chunk_size=cs, out=path, resume=True, client=client, progress=progress)
+                                   chunk_size=cs, out=path, resume=True, client=client, progress=progress, backend=backend,
+                                   switch_backend=switch_backend)
     return datasets
 
 
@@ -229,21 +236,28 @@ def write_report(out: Path, records: list[Record], meta: dict, figs: dict) -> tu
 
 
 def reproduce(out="granchain-results", realizations: int = 30_000, quick: bool = False, seed: int = 2026, Ns=PAPER_N,
-              client=None, progress: bool = True, log=print, chunk_size=None) -> dict:
+              client=None, progress: bool = True, log=print, chunk_size=None, backend=None,
+              switch_backend: bool = False) -> dict:
     """Run the paper's experiment; write figures, data, report.md/html and summary.json under ``out``.
 
     ``realizations`` >= :data:`MIN_REALIZATIONS` per chain length (``quick`` caps it at 600), ``seed`` >= 0
-    (chain length N uses 1000 * seed + N); all checked before anything runs."""
+    (chain length N uses 1000 * seed + N); all checked before anything runs. ``backend``: what computes the
+    ensembles ("cpu", the default, or "cuda": :func:`granchain.run_ensemble`); ``switch_backend``: continue
+    ensembles already in ``out`` that another backend computed."""
+    from ..ensembles import backend as _backend
+
     from .._validate import count
     from .validity import output_directory
 
     t0 = time.perf_counter()
     realizations = count("realizations", realizations, minimum=MIN_REALIZATIONS)
     seed = count("seed", seed, minimum=0)
+    _backend.resolve(_backend.checked(backend))  # an unknown or unusable backend is refused before anything is made
     out = output_directory(out)
     if quick:
         realizations = min(realizations, 600)
-    datasets = run_ensembles(out, realizations, seed, Ns, client=client, progress=progress, chunk_size=chunk_size, log=log)
+    datasets = run_ensembles(out, realizations, seed, Ns, client=client, progress=progress, chunk_size=chunk_size, log=log,
+                             backend=backend, switch_backend=switch_backend)
     sums_by_N = chunk_sums(out, Ns, log=log)
     figs = figures(datasets, out, quick, sums_by_N, log=log)
     records = build_records(datasets, figs, sums_by_N)

@@ -185,8 +185,10 @@ def compare_paired(ds, progress) -> dict:
     return res
 
 
-def _run_point(dist, N: int, realizations: int, seed: int, blocks: int, path, integrator, progress: bool) -> dict:
-    """Run (or resume) one paired ensemble into ``path`` and measure it."""
+def _run_point(dist, N: int, realizations: int, seed: int, blocks: int, path, integrator, progress: bool, backend=None,
+               switch_backend: bool = False) -> dict:
+    """Run (or resume) one paired ensemble into ``path`` (on ``backend``: :func:`granchain.run_ensemble`'s) and
+    measure it."""
     from ..ensembles.run import run_ensemble
     from ..ensembles.read import open_store
     from ..families import RandomDecorated
@@ -196,7 +198,8 @@ def _run_point(dist, N: int, realizations: int, seed: int, blocks: int, path, in
         warnings.simplefilter("always", EffectiveValidityWarning)
         family = RandomDecorated(N, dist)
         ds = run_ensemble(family, realizations=realizations, seed=seed, chains="both", integrator=integrator,
-                          chunk_size=chunk, out=path, resume=True, progress=progress)
+                          chunk_size=chunk, out=path, resume=True, progress=progress, backend=backend,
+                          switch_backend=switch_backend)
     warned = any(issubclass(w.category, EffectiveValidityWarning) for w in caught)
     for w in caught:  # anything else is re-issued
         if not issubclass(w.category, EffectiveValidityWarning):
@@ -236,7 +239,7 @@ def _variables(dims, shape):
     return data
 
 
-def _attrs(kind: str, realizations: int, seed: int, blocks: int, integrator) -> dict:
+def _attrs(kind: str, realizations: int, seed: int, blocks: int, integrator, backend=None) -> dict:
     from ..ensembles.run import ensemble_integrator
     from ..solve.integrators import get_integrator
 
@@ -253,7 +256,23 @@ def _attrs(kind: str, realizations: int, seed: int, blocks: int, integrator) -> 
         "arrival_granule": "N-1",
         "stderr": "delete-one jackknife over blocks of realisations (the ensemble chunks)",
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        # only for another backend than the CPU default: the maps of earlier versions keep their attributes
+        **({} if backend is None else {"backend": _backend_name(backend)}),
     }
+
+
+def _backend_name(backend) -> str:
+    from ..ensembles import backend as _backend
+
+    return _backend.name_of(_backend.checked(backend))
+
+
+def _usable_backend(backend):
+    """``backend`` checked (a name :func:`granchain.run_ensemble` knows, usable here) before a map starts."""
+    from ..ensembles import backend as _backend
+
+    _backend.resolve(_backend.checked(backend))
+    return backend
 
 
 def _check_common(realizations, blocks, n_large, seed=0):
@@ -280,7 +299,8 @@ def write_netcdf(ds, path) -> Path:
 
 
 def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6, 26), realizations: int = DEFAULT_REALIZATIONS,
-                 seed: int = 0, blocks: int = 10, integrator=None, progress: bool = True, netcdf: bool = True):
+                 seed: int = 0, blocks: int = 10, integrator=None, progress: bool = True, netcdf: bool = True,
+                 backend=None, switch_backend: bool = False):
     """Validity map of the effective chain and the BCA over small radii uniform on [alpha, beta].
 
     Parameters
@@ -297,6 +317,9 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
         (= ensemble chunks of ceil(realizations / blocks)).
     integrator
         Any registered integrator (default: the ensembles' DP5).
+    backend, switch_backend
+        What computes the points' ensembles ("cpu", the default, or "cuda"), and whether points computed
+        on another backend are continued (:func:`granchain.run_ensemble`).
 
     Returns
     -------
@@ -306,6 +329,7 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
     from tqdm.auto import tqdm
 
     realizations, blocks, Ns = _check_common(realizations, blocks, n_large, seed)
+    backend = _usable_backend(backend)
     try:
         a = np.array(sorted(float(x) for x in np.atleast_1d(alphas)))
         b = np.array(sorted(float(x) for x in np.atleast_1d(betas)))
@@ -319,7 +343,7 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
                     coords={"alpha": ("alpha", a, {**rescaled_attrs("radius"), "long_name": "smallest small radius (units of the large radius)"}),
                             "beta": ("beta", b, {**rescaled_attrs("radius"), "long_name": "largest small radius (units of the large radius)"}),
                             "n_large": ("n_large", np.array(Ns), {"long_name": "number N of large granules", "units": "1"})},
-                    attrs={**_attrs("validity map", realizations, seed, blocks, integrator),
+                    attrs={**_attrs("validity map", realizations, seed, blocks, integrator, backend),
                            "distribution": "uniform on [alpha, beta]"})
     points = [(i, j, k) for k in range(len(Ns)) for i in range(a.size) for j in range(b.size) if a[i] < b[j]]
     if not points:  # refused before anything is written: an empty map would look like a finished one
@@ -330,7 +354,8 @@ def validity_map(out, *, alphas=DEFAULT_ALPHAS, betas=DEFAULT_BETAS, n_large=(6,
         dist = Uniform(a[i], b[j])
         N = Ns[k]
         path = root / "points" / f"N{N}_alpha{a[i]:g}_beta{b[j]:g}.zarr"
-        res = _run_point(dist, N, realizations, point_seed(seed, N, dist.describe()), blocks, path, integrator, False)
+        res = _run_point(dist, N, realizations, point_seed(seed, N, dist.describe()), blocks, path, integrator, False,
+                         backend, switch_backend)
         for name, value in res.items():
             ds[name].values[i, j, k] = value
     if netcdf:
@@ -359,8 +384,10 @@ def default_distributions(lower: float = 0.01, upper: float = 0.4) -> dict:
 
 
 def compare_distributions(out, distributions=None, *, n_large=(6, 26), realizations: int = DEFAULT_REALIZATIONS, seed: int = 0,
-                          blocks: int = 10, integrator=None, progress: bool = True, netcdf: bool = True):
-    """The map's measures for several small-radius distributions (default: :func:`default_distributions`).
+                          blocks: int = 10, integrator=None, progress: bool = True, netcdf: bool = True, backend=None,
+                          switch_backend: bool = False):
+    """The map's measures for several small-radius distributions (default: :func:`default_distributions`),
+    their ensembles computed on ``backend`` (as :func:`validity_map`'s).
 
     Returns an xarray.Dataset with dims ``distribution`` (labels), ``n_large``; also the mean and
     std of the radius and the fraction of radii above 0.4 per distribution.
@@ -369,12 +396,13 @@ def compare_distributions(out, distributions=None, *, n_large=(6, 26), realizati
     from tqdm.auto import tqdm
 
     realizations, blocks, Ns = _check_common(realizations, blocks, n_large, seed)
+    backend = _usable_backend(backend)
     dists = default_distributions() if distributions is None else {str(k): as_distribution(v) for k, v in dict(distributions).items()}
     names = list(dists)
     ds = xr.Dataset(_variables(("distribution", "n_large"), (len(names), len(Ns))),
                     coords={"distribution": ("distribution", np.array(names, dtype=object).astype(str)),
                             "n_large": ("n_large", np.array(Ns), {"long_name": "number N of large granules", "units": "1"})},
-                    attrs=_attrs("distribution comparison", realizations, seed, blocks, integrator))
+                    attrs=_attrs("distribution comparison", realizations, seed, blocks, integrator, backend))
     ds["label"] = ("distribution", np.array([d.label() for d in dists.values()], dtype=object).astype(str))
     ds["radius_mean"] = ("distribution", [d.expect(lambda r: r) for d in dists.values()], {**rescaled_attrs("radius"), "long_name": "mean small radius"})
     ds["radius_std"] = ("distribution", [math.sqrt(max(d.expect(lambda r: r * r) - d.expect(lambda r: r) ** 2, 0.0))
@@ -387,7 +415,7 @@ def compare_distributions(out, distributions=None, *, n_large=(6, 26), realizati
         d, N = dists[names[i]], Ns[k]
         slug = "".join(ch if ch.isalnum() else "_" for ch in names[i])
         res = _run_point(d, N, realizations, point_seed(seed, N, d.describe()), blocks,
-                         root / "distributions" / f"N{N}_{slug}.zarr", integrator, False)
+                         root / "distributions" / f"N{N}_{slug}.zarr", integrator, False, backend, switch_backend)
         for name, value in res.items():
             ds[name].values[i, k] = value
     if netcdf:

@@ -252,7 +252,7 @@ def time_limit(size: int, initial_velocity: float, n: float) -> float:
     return 100.0 + 20.0 * size / max(initial_velocity, 1e-3) ** (1.0 - 2.0 / max(n, 2.0))
 
 
-def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None = None, stop: str = "exit", exit_margin: float = 3.0, max_steps: int = 20_000_000, peak_rtol: float = 1e-6, sensors=None) -> PulseResult:
+def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None = None, stop: str = "exit", exit_margin: float = 3.0, max_steps: int = 20_000_000, peak_rtol: float = 1e-6, sensors=None, backend=None) -> PulseResult:
     """Integrate Eq. (motion_rescaled) for one chain struck at granule 1.
 
     Parameters
@@ -289,6 +289,10 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
         Tie rule for the peak: a later local maximum replaces the recorded one
         only if higher by more than this relative amount (keep it above the
         integration error, below any physical difference of interest).
+    backend : str or granchain.backends.Backend, optional
+        What runs the integrator: None or "cpu" (default), the integrator's own backend (the Numba kernels,
+        SciPy for DOP853); "cuda", an NVIDIA GPU (RKN4 on elastic chains; one chain fills a GPU poorly: the
+        GPU is for ensembles, and this is for checking a chain against them).
     """
     if not isinstance(chain, Chain):
         raise ValueError(f"simulate() needs a granchain.Chain, got {type(chain).__name__}")
@@ -309,7 +313,13 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     x = np.zeros(chain.size)
     v = np.zeros(chain.size)
     v[0] = chain.initial_velocity
-    status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = integ.integrate(
+    runner = integ.integrate
+    if backend is not None and backend != "cpu":
+        from ..backends import Backend, get_backend
+
+        chosen = backend if isinstance(backend, Backend) else get_backend(backend)
+        runner = lambda *a, **k: chosen.integrate(integ, *a, **k)  # noqa: E731
+    status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = runner(
         chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit" and chain.ends_at_exit), controls=controls,
         sensed=sensed)
     # (the info record's slots, through the backends' seam: the kernels that define them load on first use,

@@ -1,0 +1,300 @@
+"""The CUDA backend: the ensembles' adaptive RKN4 on an NVIDIA GPU (Numba's CUDA target).
+
+``CudaBackend`` runs batches of chains (``run_ensemble(..., backend="cuda")``, the design evaluator,
+validity maps) and single chains (``simulate(..., backend="cuda")``) with the kernels of
+:mod:`granchain.backends.cuda.kernel` (its docstring says why a chain is a block of threads, not one
+thread). It runs what the CPU kernels run for elastic chains: RKN4 with the same step control, peaks,
+grid samples and stop rule, so its per-realisation results agree with the CPU backend's within the
+accuracy contract (not bit for bit: the GPU's fused multiply-adds round differently), and its sums of
+the averaged pulse are fixed-point integers added in a fixed order, so a run repeated gives the same
+bits. What it has no kernel for (DP5 and Verlet, precompression, damping, the aligned pulse, force
+sensors on the grid) is refused with an error that names the CPU backend.
+
+Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, which installs
+``numba-cuda``). Under ``NUMBA_ENABLE_CUDASIM=1`` the same kernels run in Numba's simulator on a CPU
+(slowly: the tests use it on tiny chains).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ...model.contacts import PowerLaw
+from .. import Backend, BackendUnavailable, effective_integrator
+
+__all__ = ["CudaBackend", "available"]
+
+#: The layouts: threads per chain. 32 (a warp) is the default, measured fastest for the paper's chains
+#: (benchmarks/bench_gpu.py); 1 is one thread per chain; the small groups exercise the exchange between
+#: threads cheaply in the simulator.
+LAYOUTS = (1, 2, 4, 8, 16, 32, 64)
+#: Chains of one launch at most, so that the grid velocities (R x T x K doubles) stay near 8 GB: the
+#: paper's 30,000 N = 26 chains in one launch (4.8 GB). Each launch waits for its slowest chain, so fewer,
+#: larger launches waste less.
+GRID_BYTES = 8_000_000_000
+#: Threads per block for one thread per chain.
+BLOCK_THREADS = 64
+
+
+def available() -> tuple[bool, str]:
+    """(True, "") when the CUDA backend can run here; else (False, why)."""
+    try:
+        from numba import cuda
+    except ImportError as exc:  # pragma: no cover - numba without its CUDA target
+        return False, f"Numba's CUDA target is not installed ({exc}): pip install granchain[cuda]"
+    try:
+        if cuda.is_available():
+            return True, ""
+    except Exception as exc:  # noqa: BLE001 - a broken driver raises anything
+        return False, f"the CUDA driver could not be loaded ({exc})"
+    return False, "no NVIDIA GPU found (numba.cuda.is_available() is False)"
+
+
+class CudaBackend(Backend):
+    """RKN4 for elastic chains on an NVIDIA GPU; ``threads_per_chain`` chooses the layout (see
+    :data:`LAYOUTS`). ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch:
+    the device time of the integration and the reduction, synchronised, transfers excluded."""
+
+    name = "cuda"
+    contact_laws = (PowerLaw,)
+    #: The integrators it has kernels for (``Integrator.name``). The ensembles give every elastic chain kind
+    #: RKN4 on it (the decorated chains' CPU default; the others' is DP5).
+    methods = ("rkn4",)
+    #: Realisations per store chunk (one launch each): a launch needs thousands of chains to fill the GPU
+    #: (one block per chain, up to 32 blocks on each of an H100's 132 multiprocessors) and lasts until its
+    #: slowest chain ends, so the paper's 30,000 go in one.
+    default_chunk_size = 30_000
+
+    def __init__(self, threads_per_chain: int = 32, max_registers: int | None = None, exchange: str | None = None):
+        ok, why = available()
+        if not ok:
+            raise BackendUnavailable(f"the cuda backend cannot run here: {why}. Use the CPU backend "
+                                     "(backend='cpu', or --backend cpu), or a machine with an NVIDIA GPU and "
+                                     "`pip install granchain[cuda]`")
+        if threads_per_chain not in LAYOUTS:
+            raise ValueError(f"threads_per_chain must be one of {LAYOUTS}, got {threads_per_chain!r}")
+        if exchange is None:
+            exchange = "shuffle" if threads_per_chain == 32 else "shared"
+        if exchange not in ("shuffle", "shared") or (exchange == "shuffle" and threads_per_chain != 32):
+            raise ValueError(f"exchange must be 'shuffle' (32 threads per chain: one warp) or 'shared', got {exchange!r} "
+                             f"with {threads_per_chain} threads per chain")
+        from . import simulator
+
+        simulator.install()  # warp shuffles for Numba's simulator (a no-op on a GPU)
+        self.threads_per_chain = int(threads_per_chain)
+        self.max_registers = max_registers
+        self.exchange = exchange
+        self.timings: list = []
+        self._kernels: dict = {}
+
+    # ------------------------------------------------------------------ what it runs
+    def check(self, integrator, chain) -> None:
+        """RKN4 alone, adaptive, on an elastic (power-law), unloaded chain at rest ahead of the pulse; then
+        :meth:`Backend.check`. Each refusal names the CPU backend, which runs all of these."""
+        cpu = "; use the CPU backend (backend='cpu')"
+        if type(chain.contact) not in self.contact_laws:
+            raise ValueError(f"the cuda backend has no kernel for the contact law {chain.contact!r} (elastic power-law "
+                             f"contacts only){cpu}")
+        if integrator.name not in self.methods:
+            raise ValueError(f"the cuda backend runs RKN4 (granchain.RKN4) alone, not {integrator.name}{cpu}")
+        if integrator.fixed_step:
+            raise ValueError(f"the cuda backend runs RKN4 with step control, not with a fixed step{cpu}")
+        if chain.static_force > 0:
+            raise ValueError(f"the cuda backend has no kernel for precompressed chains{cpu}")
+        if not chain.initial.rest_ahead:
+            raise ValueError(f"the cuda backend starts every granule but the first at rest; the initial state "
+                             f"{chain.initial!r} does not{cpu}")
+        super().check(integrator, chain)
+
+    def _kernel(self, M: int):
+        from .kernel import make_kernel
+
+        L = self.threads_per_chain
+        G = max(1, -(-M // L))
+        G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
+        if (L, G) not in self._kernels:
+            self._kernels[(L, G)] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle")
+        return L, G, self._kernels[(L, G)]
+
+    # ------------------------------------------------------------------ runs
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
+        from ..kernels.records import (
+            INFO_EXIT,
+            INFO_FROZEN_POTENTIAL,
+            INFO_REJECTED,
+            INFO_SIZE,
+            INFO_STEPS,
+            INFO_T_END,
+            INFO_WINDOW_START,
+        )
+
+        if sensed is not None and len(sensed):
+            raise ValueError("the cuda backend records no contact forces on the grid (sensors); use the CPU backend "
+                             "(backend='cpu')")
+        if np.any(x != 0.0) or np.count_nonzero(v[1:]):
+            raise ValueError("the cuda backend starts from rest with granule 1 struck; use the CPU backend (backend='cpu')")
+        self.check(integrator, chain)
+        res = self._run(integrator, chain, chain.masses[None], chain.stiffness[None], np.array([v[0]]),
+                        chain.observed, t_grid, np.array([float(t_max)]), stop_at_exit, controls, None)
+        info = np.zeros(INFO_SIZE)
+        info[INFO_T_END], info[INFO_STEPS], info[INFO_REJECTED] = res["t_end"][0], res["steps"][0], res["rejected"][0]
+        info[INFO_EXIT] = res["exit"][0]
+        info[INFO_WINDOW_START], info[INFO_FROZEN_POTENTIAL] = res["lo"][0], res["frozen"][0]
+        x[:], v[:] = res["x"][0], res["v"][0]
+        grid_f = res["grid_f"][0] if res["grid_f"] is not None else np.zeros(t_grid.size)
+        return (int(res["status"][0]), info, res["peak_v"][0], res["peak_t"][0], res["grid_v"][0], res["peak_f"][0],
+                res["peak_ft"][0], grid_f, np.zeros((t_grid.size, 0)))
+
+    def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
+                        controls, scale: float, out: dict, model: dict | None = None, pulse_end=None) -> None:
+        from .. import aligned_outputs, batch_chain
+
+        if out.get("lags") is not None:
+            raise ValueError("the cuda backend does not accumulate the aligned pulse (lags); use the CPU backend "
+                             "(backend='cpu')")
+        aligned_outputs(out, observed.shape[0])
+        integrator.check_chains(masses, stiffness, n, initial_velocity)
+        first = batch_chain(masses[0], stiffness[0], n, initial_velocity[0], observed, model)
+        self.check(integrator, first)
+        R = masses.shape[0]
+        limits = np.ascontiguousarray(np.broadcast_to(np.asarray(t_max, dtype=float), (R,)))
+        res = self._run(integrator, first, masses, stiffness, initial_velocity, observed, t_grid, limits,
+                        first.ends_at_exit, controls, pulse_end, scale=scale, sums=out)
+        wall = first.boundary.wall
+        out["peak_velocity"][:], out["peak_time"][:] = res["peak_v"], res["peak_t"]
+        contacts = np.asarray(contacts, dtype=np.int64)
+        out["peak_force"][:], out["peak_force_time"][:] = res["peak_f"][:, contacts], res["peak_ft"][:, contacts]
+        if wall:
+            out["peak_wall"][:, 0], out["peak_wall"][:, 1] = res["peak_f"][:, -1], res["peak_ft"][:, -1]
+        out["status"][:], out["n_steps"][:], out["t_end"][:] = res["status"], res["steps"], res["t_end"]
+        out["energy_error"][:] = _energy_errors(first, masses, stiffness, initial_velocity, res)
+        if "dissipated_energy" in out:
+            out["dissipated_energy"][:] = 0.0
+        out["n_valid"][0] += int(np.count_nonzero(res["status"] == 0))
+
+    def _run(self, integrator, chain, masses, stiffness, v0, observed, t_grid, t_max, stop_at_exit, controls,
+             pulse_end, *, scale=None, sums=None) -> dict:
+        """Integrate the rows on the GPU in launches of at most :data:`GRID_BYTES` of grid velocities. Returns
+        the per-row arrays (and, with ``sums``, adds the averaged pulse's fixed-point sums into it)."""
+        from numba import cuda
+
+        from .kernel import P_SIZE
+
+        ran = effective_integrator(integrator, chain)
+        R, M = masses.shape
+        observed = np.asarray(observed, dtype=np.int64)
+        K, T = observed.size, t_grid.size
+        obs_of = np.full(M, -1, dtype=np.int64)
+        obs_of[observed] = np.arange(K)
+        ends = np.full(K, np.inf) if pulse_end is None else np.asarray(pulse_end, dtype=float)
+        prm = np.zeros(P_SIZE)
+        prm[:] = (ran.rtol, ran.atol, ran.first_step, ran.relaxed_lag or 0, ran.relaxed_factor, ran.window_lag or 0,
+                  controls.exit_margin, controls.peak_rtol, controls.max_steps, float(chain.n), float(bool(stop_at_exit)),
+                  float(chain.boundary.wall), float(t_grid[-1]) if T else 0.0, float(pulse_end is not None))
+        L, G, kernel = self._kernel(M)
+        wall = chain.boundary.wall
+        # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
+        # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.
+        order = _longest_first(masses, stiffness)
+        masses, stiffness, v0, t_max = masses[order], stiffness[order], np.asarray(v0)[order], np.asarray(t_max)[order]
+        per = max(1, min(R, int(GRID_BYTES // max(1, T * K * 8))))
+        const = [cuda.to_device(np.ascontiguousarray(a)) for a in (obs_of, observed, np.asarray(t_grid, float), ends, prm)]
+        res = {k: [] for k in ("peak_v", "peak_t", "peak_f", "peak_ft", "status", "steps", "rejected", "t_end", "exit",
+                               "lo", "frozen", "x", "v", "grid_v", "grid_f")}
+        elapsed = 0.0
+        launches = 0
+        for start in range(0, R, per):
+            sl = slice(start, min(R, start + per))
+            r = sl.stop - sl.start
+            d_in = [cuda.to_device(np.ascontiguousarray(a[sl], dtype=float)) for a in (masses, stiffness, v0, t_max)]
+            shapes = {"peak_v": (r, K), "peak_t": (r, K), "peak_f": (r, M - 1), "peak_ft": (r, M - 1), "peak_d": (r, M - 1),
+                      "grid_v": (r, T, K), "grid_f": (r, T if wall else 1)}
+            d_out = {k: cuda.device_array(s, dtype=np.float64) for k, s in shapes.items()}
+            for k in ("status", "steps", "rejected", "lo"):
+                d_out[k] = cuda.device_array(r, dtype=np.int64)
+            for k in ("t_end", "exit", "frozen"):
+                d_out[k] = cuda.device_array(r, dtype=np.float64)
+            d_out["x"] = cuda.device_array((r, M), dtype=np.float64)
+            d_out["v"] = cuda.device_array((r, M), dtype=np.float64)
+            blocks, threads = (r, L) if L > 1 else (-(-r // BLOCK_THREADS), BLOCK_THREADS)
+            cuda.synchronize()
+            t0 = time.perf_counter()
+            kernel[blocks, threads](*d_in[:2], d_in[2], d_in[3], *const, d_out["peak_v"], d_out["peak_t"], d_out["peak_f"],
+                                    d_out["peak_ft"], d_out["peak_d"], d_out["grid_v"], d_out["grid_f"], d_out["status"],
+                                    d_out["steps"], d_out["rejected"], d_out["t_end"], d_out["exit"], d_out["lo"],
+                                    d_out["frozen"], d_out["x"], d_out["v"])
+            if sums is not None and T and K:
+                d_sv = cuda.to_device(np.zeros((T, K), dtype=np.int64))
+                d_sv2 = cuda.to_device(np.zeros((T, K), dtype=np.int64))
+                make_sum_kernel_cached()[-(-(T * K) // 128), 128](d_out["grid_v"], d_out["status"], float(scale), d_sv, d_sv2)
+                if wall:
+                    d_sf = cuda.to_device(np.zeros(T, dtype=np.int64))
+                    make_wall_sum_kernel_cached()[-(-T // 128), 128](d_out["grid_f"], d_out["status"], float(scale), d_sf)
+            cuda.synchronize()
+            elapsed += time.perf_counter() - t0
+            launches += 1
+            if sums is not None and T and K:
+                sums["sum_v"] += d_sv.copy_to_host()
+                sums["sum_v2"] += d_sv2.copy_to_host()
+                if wall:
+                    sums["sum_wall"] += d_sf.copy_to_host()
+            for k in res:
+                if k == "grid_v" and sums is not None:
+                    continue  # reduced on the device
+                if k == "grid_f" and (not wall or sums is not None):
+                    continue
+                res[k].append(d_out[k].copy_to_host())
+        self.timings.append({"kernel_s": elapsed, "realizations": R, "launches": launches})
+        back = np.empty_like(order)
+        back[order] = np.arange(R)
+        joined = {k: (np.concatenate(a)[back] if a else None) for k, a in res.items()}
+        joined["status"] = joined["status"].astype(np.int64)
+        return joined
+
+
+def _longest_first(masses, stiffness) -> np.ndarray:
+    """The rows in decreasing order of their fastest contact oscillation, max_j sqrt(c_j / min(m_j, m_j+1)):
+    an adaptive step follows the lightest granule squeezed by its stiffest contact, so this orders the rows
+    by their expected number of steps (stable: equal rows keep their order)."""
+    c = np.asarray(stiffness, dtype=float)[:, : masses.shape[1] - 1]
+    lightest = np.minimum(masses[:, :-1], masses[:, 1:])
+    rate = np.max(np.sqrt(c / lightest), axis=1) if c.shape[1] else np.zeros(masses.shape[0])
+    return np.argsort(-rate, kind="stable")
+
+
+_SUMS: dict = {}
+
+
+def make_sum_kernel_cached():
+    from .kernel import make_sum_kernel
+
+    if "v" not in _SUMS:
+        _SUMS["v"] = make_sum_kernel()
+    return _SUMS["v"]
+
+
+def make_wall_sum_kernel_cached():
+    from .kernel import make_wall_sum_kernel
+
+    if "f" not in _SUMS:
+        _SUMS["f"] = make_wall_sum_kernel()
+    return _SUMS["f"]
+
+
+def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
+    """(E_end - E_0) / E_0 per row (``kernels.forces.final_energy``): kinetic energy of every granule (a
+    wall's left out; granules behind the trailing window keep the velocity they left with), the potential
+    (c / n) delta^n (Eq. hertz-1) of the contacts still integrated at the end, and the potential the
+    contacts behind the window held when they left it; E_0 = m_1 v_0^2 / 2."""
+    n = float(chain.n)
+    x, v, lo = res["x"], res["v"], res["lo"]
+    finite = np.isfinite(masses)
+    kinetic = 0.5 * np.sum(np.where(finite, masses, 0.0) * v * v, axis=1)
+    d = np.maximum(x[:, :-1] - x[:, 1:], 0.0)
+    integrated = np.arange(d.shape[1])[None, :] >= lo[:, None]
+    potential = np.sum(np.where(integrated, stiffness[:, : d.shape[1]] * d**n, 0.0), axis=1) / n + res["frozen"]
+    e0 = 0.5 * masses[:, 0] * v0 * v0
+    with np.errstate(invalid="ignore"):
+        return (kinetic + potential - e0) / e0

@@ -1,0 +1,781 @@
+"""The CUDA kernels: adaptive RKN4(3) over a batch of chains, a group of ``L`` threads per chain.
+
+Layout (why it is not one thread per chain). An adaptive method takes as many steps as its chain
+needs, and the paper's decorated chains differ in that by up to 50x (the tiniest decorating granules
+ring fastest): laid out one thread per chain, a warp runs as long as its slowest chain and each
+thread's stage arrays live in local memory (measured: 937 s for the paper's 30,000 N = 26 chains on an
+H200, against 3.6 s here). Here a chain is a block of ``L`` threads (``L`` = 32: one warp) and its
+granules are spread across them, ``G`` consecutive granules a thread (``L * G >= M``); the group shares
+one step size, so its threads never diverge in step count, and a block that finishes frees its slot
+for the next chain at once (the host launches the chains longest first). Per step the threads exchange
+only what crosses their boundaries: the neighbours' stage positions (for the contact forces,
+Eq. (motion_rescaled)), the error norm's maximum, the candidates of peaks and of the trailing window's
+cut, by warp shuffles (``shuffle``, the default at ``L`` = 32) or through shared memory and barriers;
+and, on the few steps that hold a peak or a grid time, the dense output of every granule, through
+shared memory. ``L = 1`` compiles the same code as one thread per chain (its exchange arrays in local
+memory, no barriers), the layout it is measured against (``benchmarks/bench_gpu.py``).
+
+The method, step control and records are those of the CPU kernels (``granchain.backends.kernels``:
+``rkn4`` for the Runge-Kutta-Nystrom pair of Dormand, El-Mikkawy & Prince, ``rkloop`` for the PI
+controller, the max-norm error with its relaxed zone and the stop rule, ``dense`` for the peaks
+located as roots on the quintic Hermite dense output), written once more for the GPU because a GPU
+kernel cannot call the CPU's: compiled by NVVM, whose fused multiply-adds round differently, the
+results agree with the CPU's within the accuracy contract, not bit for bit (in Numba's simulator,
+which computes as the CPU does, they are the CPU's to rounding: ``tests/test_cuda.py``). The granules
+ahead of the pulse are integrated too (the CPU's active window skips them: they are exactly at rest, so
+this changes nothing, and the threads that hold them would idle anyway); the trailing window behind the
+pulse is the CPU's (``kernels.window``). Elastic power-law contacts (Hertz, n = 5/2, or any n), free end or fixed wall, no
+precompression and no damping: what else a chain declares is refused by ``CudaBackend.check``.
+
+The averaged pulse is reduced by :func:`make_sum_kernel`: one thread per (grid time, granule) adds
+the fixed-point values of the successful realisations in realisation order, integers, so a run gives
+the same sums every time and the same sums as the CPU kernels for the same velocities.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import cuda, float64, int64
+
+from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
+
+# The method's tables, the step control's constants and the stop and window rules: the CPU kernels' own
+# numbers (one source; the GPU code below is the CPU's written for CUDA).
+from ..kernels.rkloop import ALPHA_RKN4, BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN
+from ..kernels.rkn4 import (
+    A10,
+    A20,
+    A21,
+    B0,
+    B1,
+    B2,
+    C1,
+    C2,
+    EB0,
+    EB1,
+    EB2,
+    EB3,
+    EP0,
+    EP1,
+    EP2,
+    EP3,
+    P0,
+    P1,
+    P2,
+    P3,
+)
+from ..kernels.stop import RATTLER_MASS_RATIO
+from ..kernels.window import CUT_FORCE
+
+FULL_MASK = 0xFFFFFFFF  # every lane of a warp (the shuffle exchange)
+
+#: Layout of the float settings array ``prm`` the kernel reads.
+(P_RTOL, P_ATOL, P_FIRST, P_RELAX_LAG, P_RELAX_FACTOR, P_WINDOW_LAG, P_EXIT_MARGIN, P_PEAK_RTOL, P_MAX_STEPS, P_N,
+ P_STOP_AT_EXIT, P_WALL, P_T_NEEDED, P_WINDOWS, P_SIZE) = range(15)
+
+
+@cuda.jit(device=True)
+def contact_force(d, c, n):
+    """c d^(n-1) for d > 0, else 0 (Eq. motion_rescaled; Hertz's power by a square root)."""
+    if d <= 0.0:
+        return 0.0
+    if n == 2.5:
+        return c * d * math.sqrt(d)
+    if n == 2.0:
+        return c * d
+    return c * d ** (n - 1.0)
+
+
+@cuda.jit(device=True)
+def hermite_x(x0, v0, a0, x1, v1, a1, h, t):
+    """Position at theta = t on the quintic Hermite interpolant through (x, v, a) at both ends of a step
+    (``kernels.rkn4.hermite_weights``)."""
+    t2 = t * t
+    t3 = t2 * t
+    t4 = t3 * t
+    t5 = t4 * t
+    q0 = t - 6 * t3 + 8 * t4 - 3 * t5
+    q1 = 10 * t3 - 15 * t4 + 6 * t5
+    q2 = 0.5 * t2 - 1.5 * t3 + 1.5 * t4 - 0.5 * t5
+    q3 = 0.5 * t3 - t4 + 0.5 * t5
+    q6 = -4 * t3 + 7 * t4 - 3 * t5
+    return x0 + h * (v0 * q0 + (x1 - x0) / h * q1 + h * a0 * q2 + h * a1 * q3 + v1 * q6)
+
+
+@cuda.jit(device=True)
+def hermite_v(x0, v0, a0, x1, v1, a1, h, t):
+    """Velocity (the derivative of :func:`hermite_x`) at theta = t."""
+    t2 = t * t
+    t3 = t2 * t
+    t4 = t3 * t
+    q0 = t - 4.5 * t2 + 6 * t3 - 2.5 * t4
+    q1 = 30 * t2 - 60 * t3 + 30 * t4
+    q2 = -18 * t2 + 32 * t3 - 15 * t4
+    q3 = -12 * t2 + 28 * t3 - 15 * t4
+    q6 = 1.5 * t2 - 4 * t3 + 2.5 * t4
+    return v0 + h * (a0 * q0 + (x1 - x0) / (h * h) * q1 + v0 / h * q2 + v1 / h * q3 + a1 * q6)
+
+
+@cuda.jit(device=True)
+def dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t):
+    return hermite_x(hx0[k], hv0[k], ha0[k], hx1[k], hv1[k], ha1[k], h, t)
+
+
+@cuda.jit(device=True)
+def dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t):
+    return hermite_v(hx0[k], hv0[k], ha0[k], hx1[k], hv1[k], ha1[k], h, t)
+
+
+@cuda.jit(device=True)
+def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, n):
+    """Acceleration of granule k from the dense-output positions of it and its neighbours."""
+    xk = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
+    left = 0.0
+    right = 0.0
+    if k > 0:
+        left = contact_force(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk, c_left, n)
+    if k < M - 1:
+        right = contact_force(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), c_right, n)
+    return (left - right) * inv_m
+
+
+@cuda.jit(device=True)
+def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_left, c_right, inv_m, n):
+    """First theta in [0, 1] where the followed function stops being positive (``kernels.dense.first_root``:
+    Illinois while the bracket has a strictly negative end, bisection while it ends on an exact zero):
+    ``what`` 0, granule k's acceleration (its velocity maximum); 1, contact k's relative velocity (its
+    compression maximum)."""
+    lo = 0.0
+    hi = 1.0
+    side = 0
+    for _ in range(200):
+        if f_hi < 0.0:
+            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            if not (lo < theta < hi):
+                theta = 0.5 * (lo + hi)
+        else:
+            theta = 0.5 * (lo + hi)
+        if what == 0:
+            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_left, c_right, inv_m, n)
+        else:
+            f = (dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                 - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta))
+        if f > 0.0:
+            lo = theta
+            f_lo = f
+            if side == -1:
+                f_hi *= 0.5
+            side = -1
+        else:
+            hi = theta
+            f_hi = f
+            if side == 1:
+                f_lo *= 0.5
+            side = 1
+        if hi - lo < 1e-14:
+            break
+    return hi
+
+
+@cuda.jit(device=True)
+def falls(f0, f1):
+    return f0 > 0.0 and f1 <= 0.0
+
+
+@cuda.jit(device=True)
+def hermite_max_estimate(d0, w0, d1, w1, h):
+    """``kernels.dense.hermite_max_estimate``: a cheap estimate of a compression maximum inside a step."""
+    theta = w0 / (w0 - w1)
+    t2 = theta * theta
+    t3 = t2 * theta
+    return (2 * t3 - 3 * t2 + 1) * d0 + (t3 - 2 * t2 + theta) * h * w0 + (-2 * t3 + 3 * t2) * d1 + (t3 - t2) * h * w1
+
+
+@cuda.jit(device=True)
+def rint(x):
+    """Round half to even (NumPy's ``rint``, which the CPU kernels' fixed-point sums use)."""
+    f = math.floor(x)
+    d = x - f
+    if d > 0.5 or (d == 0.5 and f - 2.0 * math.floor(0.5 * f) != 0.0):
+        f += 1.0
+    return f
+
+
+@cuda.jit(device=True)
+def cut_target(front, window_lag, windows, q_open, obs):
+    """The granule the trailing window may cut behind: observed granule front - window_lag, never past
+    one whose averaged-pulse window is still open (``q_open``); -1 while there is none."""
+    if window_lag <= 0 or front < window_lag:
+        return int64(-1)
+    target = front - window_lag
+    if windows:
+        target = min(target, q_open)
+    return obs[target]
+
+
+def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False):
+    """The RKN4 batch kernel for ``L`` threads per chain and ``G`` granules per thread (chains of up to
+    ``L * G`` granules). ``L`` and ``G`` are constants of its code: Numba prunes the barriers of
+    ``L = 1`` and sizes the per-thread arrays by ``G``. ``max_registers`` caps the registers per thread
+    (more resident chains per multiprocessor, against spills: measured in benchmarks/bench_gpu.py).
+
+    Barriers: a group exchanges the stage positions through two alternating shared arrays, so that one
+    barrier per force evaluation suffices (a thread can only overwrite an array after every thread has
+    passed the next barrier, i.e. finished reading it); per step, three for the stages, one for the
+    error norm and two for the candidates of peaks and of the trailing window's cut.
+
+    ``shuffle`` (``L`` = 32, one warp per chain): the neighbours' positions and every reduction of a step
+    go through warp shuffles instead, with no barrier at all in a step without a peak or grid time (Numba's
+    simulator has no shuffles: the tests run the shared-memory exchange, the benchmark both)."""
+    MMAX = L * G
+    GROUP = L > 1
+    SHUFFLE = bool(shuffle)
+    if SHUFFLE and L != 32:
+        raise ValueError("the shuffle exchange needs one warp (32 threads) per chain")
+    options = {} if max_registers is None else {"max_registers": max_registers}
+
+    @cuda.jit(device=True)
+    def sync():
+        if GROUP:
+            cuda.syncthreads()
+
+    @cuda.jit(device=True)
+    def group_max(value, red, lane):
+        """The maximum of ``value`` over the group's threads (every thread gets it)."""
+        if SHUFFLE:
+            off = 16
+            while off > 0:
+                value = max(value, cuda.shfl_xor_sync(FULL_MASK, value, off))
+                off //= 2
+            return value
+        red[lane] = value
+        sync()
+        m = red[0]
+        for l in range(1, L):
+            m = max(m, red[l])
+        return m
+
+    @cuda.jit(device=True)
+    def group_sum(value, red, lane):
+        """The sum of ``value`` over the group's threads, in an order fixed by the layout (deterministic)."""
+        if SHUFFLE:
+            off = 16
+            while off > 0:
+                value += cuda.shfl_xor_sync(FULL_MASK, value, off)
+                off //= 2
+            return value
+        red[lane] = value
+        sync()
+        total = 0.0
+        for l in range(L):
+            total += red[l]
+        return total
+
+    @cuda.jit(device=True)
+    def right_neighbour(values, own, M, shared):
+        """The value of granule own + G (the right neighbour of this thread's last granule; 0 past the chain):
+        from the next thread by a shuffle, or from ``shared`` (written, and a barrier passed, before)."""
+        if SHUFFLE:
+            return cuda.shfl_down_sync(FULL_MASK, values[0], 1)
+        j = own + G
+        return shared[j] if j < M else 0.0
+
+    @cuda.jit(device=True)
+    def forces(xs, own, M, lo, bx, c_left, c_right, inv_m, n, acc):
+        """acc[s] = the acceleration of owned granule s at the positions ``xs``: every thread of the group
+        calls it (the positions cross thread boundaries through ``bx``, or by shuffles). Granules behind the
+        trailing window (i < lo) are not integrated (acceleration 0: they continue ballistically) and the
+        contact at its edge is dropped (``kernels.window``)."""
+        if SHUFFLE:
+            xl = cuda.shfl_up_sync(FULL_MASK, xs[G - 1], 1)
+            xr = cuda.shfl_down_sync(FULL_MASK, xs[0], 1)
+        else:
+            for s in range(G):
+                i = own + s
+                if i < M:
+                    bx[i] = xs[s]
+            sync()
+        for s in range(G):
+            i = own + s
+            if i < M:
+                left = 0.0
+                right = 0.0
+                if SHUFFLE:
+                    if i > lo:
+                        left = contact_force((xs[s - 1] if s > 0 else xl) - xs[s], c_left[s], n)
+                    if i < M - 1:
+                        right = contact_force(xs[s] - (xs[s + 1] if s < G - 1 else xr), c_right[s], n)
+                else:
+                    if i > lo:
+                        left = contact_force(bx[i - 1] - xs[s], c_left[s], n)
+                    if i < M - 1:
+                        right = contact_force(xs[s] - bx[i + 1], c_right[s], n)
+                acc[s] = (left - right) * inv_m[s] if i >= lo else 0.0
+
+    @cuda.jit(device=True)
+    def cut_candidates(target, own, lo, M, xs, xr, c_right, n):
+        """This thread's share of ``kernels.window.open_contact_behind``: the last open contact j in
+        lo..target-1 among its own (the new positions ``xs``; ``xr`` the right neighbour of its last granule),
+        and the last one holding less than CUT_FORCE (-1: none)."""
+        j_open = int64(-1)
+        j_weak = int64(-1)
+        for s in range(G):
+            i = own + s
+            if i >= lo and i < target and i < M - 1:
+                d = xs[s] - (xs[s + 1] if s < G - 1 else xr)
+                if d <= 0.0:
+                    j_open = max(j_open, i)
+                elif contact_force(d, c_right[s], n) <= CUT_FORCE:
+                    j_weak = max(j_weak, i)
+        return j_open, j_weak
+
+    @cuda.jit(**options)
+    def kernel(masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, pulse_end, prm,
+               peak_v, peak_t, peak_f, peak_ft, peak_d, grid_v, grid_f, status_out, steps_out, rejected_out,
+               t_end_out, exit_out, lo_out, frozen_out, x_out, v_out):
+        if GROUP:
+            r = cuda.blockIdx.x
+            lane = cuda.threadIdx.x
+        else:
+            r = cuda.blockIdx.x * cuda.blockDim.x + cuda.threadIdx.x
+            lane = 0
+        R = masses.shape[0]
+        if r >= R:
+            return
+        M = masses.shape[1]
+        T = t_grid.shape[0]
+        K = obs.shape[0]
+        own = lane * G  # first granule of this thread
+        # Exchange arrays: shared by the group's threads (one chain per block), or the thread's own.
+        if GROUP:
+            bxa = cuda.shared.array(MMAX, float64)
+            bxb = cuda.shared.array(MMAX, float64)
+            hx0 = cuda.shared.array(MMAX, float64)
+            hv0 = cuda.shared.array(MMAX, float64)
+            ha0 = cuda.shared.array(MMAX, float64)
+            hx1 = cuda.shared.array(MMAX, float64)
+            hv1 = cuda.shared.array(MMAX, float64)
+            ha1 = cuda.shared.array(MMAX, float64)
+            red_e = cuda.shared.array(L, float64)
+            red_c = cuda.shared.array(L, int64)
+            red_o = cuda.shared.array(L, int64)
+            red_f = cuda.shared.array(L, int64)
+            red_q = cuda.shared.array(L, int64)
+            red_b = cuda.shared.array(L, int64)
+            tail = cuda.shared.array(4, float64)
+        else:
+            bxa = cuda.local.array(MMAX, float64)
+            bxb = cuda.local.array(MMAX, float64)
+            hx0 = cuda.local.array(MMAX, float64)
+            hv0 = cuda.local.array(MMAX, float64)
+            ha0 = cuda.local.array(MMAX, float64)
+            hx1 = cuda.local.array(MMAX, float64)
+            hv1 = cuda.local.array(MMAX, float64)
+            ha1 = cuda.local.array(MMAX, float64)
+            red_e = cuda.local.array(1, float64)
+            red_c = cuda.local.array(1, int64)
+            red_o = cuda.local.array(1, int64)
+            red_f = cuda.local.array(1, int64)
+            red_q = cuda.local.array(1, int64)
+            red_b = cuda.local.array(1, int64)
+            tail = cuda.local.array(4, float64)
+        x = cuda.local.array(G, float64)
+        v = cuda.local.array(G, float64)
+        a0 = cuda.local.array(G, float64)
+        k1 = cuda.local.array(G, float64)
+        k2 = cuda.local.array(G, float64)
+        a3 = cuda.local.array(G, float64)
+        xs = cuda.local.array(G, float64)
+        vs = cuda.local.array(G, float64)
+        inv_m = cuda.local.array(G, float64)
+        mass = cuda.local.array(G, float64)
+        c_left = cuda.local.array(G, float64)
+        c_right = cuda.local.array(G, float64)
+        q_of = cuda.local.array(G, int64)
+
+        rtol = prm[P_RTOL]
+        atol = prm[P_ATOL]
+        relax_lag = int64(prm[P_RELAX_LAG])
+        relax_factor = prm[P_RELAX_FACTOR]
+        window_lag = int64(prm[P_WINDOW_LAG])
+        exit_margin = prm[P_EXIT_MARGIN]
+        peak_rtol = prm[P_PEAK_RTOL]
+        max_steps = int64(prm[P_MAX_STEPS])
+        n = prm[P_N]
+        stop_at_exit = prm[P_STOP_AT_EXIT] > 0.0
+        wall = prm[P_WALL] > 0.0
+        t_needed = prm[P_T_NEEDED]
+        windows = prm[P_WINDOWS] > 0.0
+        t_max = t_limit[r]
+        m_last = masses[r, M - 1]
+
+        for s in range(G):
+            i = own + s
+            x[s] = 0.0
+            v[s] = 0.0
+            xs[s] = 0.0
+            inv_m[s] = 0.0
+            mass[s] = 0.0
+            c_left[s] = 0.0
+            c_right[s] = 0.0
+            q_of[s] = -1
+            if i < M:
+                mass[s] = masses[r, i]
+                inv_m[s] = 1.0 / masses[r, i]  # 0 for a wall (infinite mass)
+                if i > 0:
+                    c_left[s] = stiffness[r, i - 1]
+                if i < M - 1:
+                    c_right[s] = stiffness[r, i]
+                q_of[s] = obs_of[i]
+                if i == 0:
+                    v[s] = v_init[r]
+                if i < M - 1:
+                    peak_f[r, i] = 0.0
+                    peak_ft[r, i] = 0.0
+                    peak_d[r, i] = 0.0
+        # The initial state: the first peak candidates, and the grid times <= 0.
+        for s in range(G):
+            q = q_of[s]
+            if q >= 0:
+                peak_v[r, q] = v[s]
+                peak_t[r, q] = 0.0
+        g = 0
+        while g < T and t_grid[g] <= 0.0:
+            for s in range(G):
+                q = q_of[s]
+                if q >= 0:
+                    grid_v[r, g, q] = v[s]
+            if wall and lane == 0:
+                grid_f[r, g] = 0.0
+            g += 1
+        lo = int64(0)  # the trailing window: granules 0..lo-1 have left the integration
+        forces(x, own, M, lo, bxa, c_left, c_right, inv_m, n, a0)
+
+        t = 0.0
+        h = prm[P_FIRST]
+        err_old = 1e-4
+        exit_since = -1.0
+        n_acc = int64(0)
+        n_rej = int64(0)
+        front = int64(-1)
+        relaxed = int64(0)
+        q_open = int64(0)
+        frozen = 0.0
+        status = int64(-1)
+        while status < 0:
+            if n_acc + n_rej >= max_steps:
+                status = MAX_STEPS
+                break
+            t_stop = t_max
+            if exit_since >= 0.0:
+                t_stop = min(t_max, max(exit_since + exit_margin, t_needed))
+            last = False
+            if t + h >= t_stop:
+                h = t_stop - t
+                last = True
+            h2 = h * h
+            # Stages 1..3 (``kernels.rkn4.stages``); a3 is the force per mass at the new position.
+            for s in range(G):
+                xs[s] = x[s] + h * (C1 * v[s]) + h2 * (A10 * a0[s])
+            forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k1)
+            for s in range(G):
+                xs[s] = x[s] + h * (C2 * v[s]) + h2 * (A20 * a0[s] + A21 * k1[s])
+            forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k2)
+            for s in range(G):
+                xs[s] = x[s] + h * v[s] + h2 * (B0 * a0[s] + B1 * k1[s] + B2 * k2[s])
+            forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, a3)
+            # The new velocities and this thread's share of the error norm (``kernels.rkn4.error_ratios``).
+            e = 0.0
+            for s in range(G):
+                i = own + s
+                vs[s] = v[s] + h * (P0 * a0[s] + P1 * k1[s] + P2 * k2[s] + P3 * a3[s])
+                if i < M:
+                    w = relax_factor if i < relaxed else 1.0
+                    ex = h2 * (EB0 * a0[s] + EB1 * k1[s] + EB2 * k2[s] + EB3 * a3[s])
+                    ev = h * (EP0 * a0[s] + EP1 * k1[s] + EP2 * k2[s] + EP3 * a3[s])
+                    rx = abs(ex) / ((atol + rtol * max(abs(x[s]), abs(xs[s]))) * w)
+                    rv = abs(ev) / ((atol + rtol * max(abs(v[s]), abs(vs[s]))) * w)
+                    if not (rx <= 1e300):  # inf or NaN wins (a max would drop a NaN)
+                        rx = math.inf
+                    if not (rv <= 1e300):
+                        rv = math.inf
+                    e = max(e, max(rx, rv))
+                    if not SHUFFLE:
+                        if i == M - 2:
+                            tail[0] = xs[s]
+                            tail[1] = vs[s]
+                        if i == M - 1:
+                            tail[2] = xs[s]
+                            tail[3] = vs[s]
+            err = group_max(e, red_e, lane)
+            if SHUFFLE:  # the last two granules' new state, from the threads that hold them
+                x_m2 = 0.0
+                v_m2 = 0.0
+                x_m1 = 0.0
+                v_m1 = 0.0
+                for s in range(G):
+                    if own + s == M - 2:
+                        x_m2 = xs[s]
+                        v_m2 = vs[s]
+                    if own + s == M - 1:
+                        x_m1 = xs[s]
+                        v_m1 = vs[s]
+                x_m2 = cuda.shfl_sync(FULL_MASK, x_m2, (M - 2) // G)
+                v_m2 = cuda.shfl_sync(FULL_MASK, v_m2, (M - 2) // G)
+                x_m1 = cuda.shfl_sync(FULL_MASK, x_m1, (M - 1) // G)
+                v_m1 = cuda.shfl_sync(FULL_MASK, v_m1, (M - 1) // G)
+            else:
+                x_m2 = tail[0]
+                v_m2 = tail[1]
+                x_m1 = tail[2]
+                v_m1 = tail[3]
+            if not (err <= 1e300):
+                status = NONFINITE
+                break
+            if err > 1.0:
+                n_rej += 1
+                h *= max(MIN_FACTOR, SAFETY * err ** -ALPHA_RKN4)
+                if h < 1e-14 * max(1.0, t):
+                    status = STEP_UNDERFLOW
+                continue
+
+            # Accepted. The candidates: a velocity maximum of an observed granule or a compression maximum
+            # (their roots need the dense output of every granule), and, behind the front, the contact
+            # the trailing window may cut (``kernels.window.open_contact_behind``). The right neighbour's
+            # state crosses thread boundaries: start velocities in bxa, new velocities in hv1, new positions
+            # in hx1.
+            t_new = t + h if not last else t_stop
+            if windows:
+                while q_open < K and pulse_end[q_open] < t_new:
+                    q_open += 1
+            target = cut_target(front, window_lag, windows, q_open, obs)
+            if not SHUFFLE:
+                for s in range(G):
+                    i = own + s
+                    if i < M:
+                        bxa[i] = v[s]
+                        hv1[i] = vs[s]
+                        hx1[i] = xs[s]
+                sync()
+            vr0 = right_neighbour(v, own, M, bxa)
+            vr1 = right_neighbour(vs, own, M, hv1)
+            xr1 = right_neighbour(xs, own, M, hx1)
+            cand = 0
+            for s in range(G):
+                i = own + s
+                if i >= lo and i < M:
+                    if q_of[s] >= 0 and falls(a0[s], a3[s]):
+                        cand = 1
+                    if i < M - 1 and falls(v[s] - (v[s + 1] if s < G - 1 else vr0),
+                                           vs[s] - (vs[s + 1] if s < G - 1 else vr1)):
+                        cand = 1
+            j_open, j_weak = cut_candidates(target, own, lo, M, xs, xr1, c_right, n)
+            need = group_max(cand, red_c, lane)
+            j_open = group_max(j_open, red_o, lane)
+            j_weak = group_max(j_weak, red_f, lane)
+            if g < T and t_grid[g] <= t + h:
+                need = 1
+            if need > 0:
+                # The dense output of every granule, for the roots and the grid samples.
+                for s in range(G):
+                    i = own + s
+                    if i < M:
+                        hx0[i] = x[s]
+                        hv0[i] = v[s]
+                        ha0[i] = a0[s]
+                        hx1[i] = xs[s]
+                        hv1[i] = vs[s]
+                        ha1[i] = a3[s]
+                sync()
+                found = int64(-1)
+                for s in range(G):
+                    i = own + s
+                    q = q_of[s]
+                    if i >= lo and i < M and q >= 0 and falls(a0[s], a3[s]):
+                        theta = root(0, i, M, a0[s], a3[s], hx0, hv0, ha0, hx1, hv1, ha1, h,
+                                     c_left[s] if i > lo else 0.0, c_right[s], inv_m[s], n)
+                        vpk = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                        if vpk > peak_v[r, q] + peak_rtol * abs(peak_v[r, q]):
+                            peak_v[r, q] = vpk
+                            peak_t[r, q] = t + theta * h
+                        found = max(found, q)
+                    if i >= lo and i < M - 1:
+                        w0 = hv0[i] - hv0[i + 1]
+                        w1 = hv1[i] - hv1[i + 1]
+                        if falls(w0, w1):
+                            d0 = hx0[i] - hx0[i + 1]
+                            d1 = hx1[i] - hx1[i + 1]
+                            if hermite_max_estimate(d0, w0, d1, w1, h) >= SCREEN * peak_d[r, i]:
+                                theta = root(1, i, M, w0, w1, hx0, hv0, ha0, hx1, hv1, ha1, h, 0.0, 0.0, 0.0, n)
+                                dp = (dense_x(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                                      - dense_x(i + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta))
+                                fp = contact_force(dp, c_right[s], n)
+                                if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
+                                    peak_f[r, i] = fp
+                                    peak_ft[r, i] = t + theta * h
+                                    peak_d[r, i] = dp
+                while g < T and t_grid[g] <= t + h:
+                    theta = (t_grid[g] - t) / h
+                    for s in range(G):
+                        i = own + s
+                        q = q_of[s]
+                        if q >= 0:
+                            if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
+                                grid_v[r, g, q] = 0.0
+                            elif i < lo:  # behind the trailing window: the velocity it left with
+                                grid_v[r, g, q] = v[s]
+                            else:
+                                grid_v[r, g, q] = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                        if wall and i == M - 2:
+                            grid_f[r, g] = contact_force(
+                                dense_x(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                                - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), c_right[s], n)
+                    g += 1
+                before = front
+                front = max(front, group_max(found, red_q, lane))
+                if relax_lag > 0 and front >= relax_lag:
+                    relaxed = obs[front - relax_lag]
+                if front != before and window_lag > 0:
+                    # The front moved in this step: the cut is decided behind the new one (as the CPU does).
+                    target = cut_target(front, window_lag, windows, q_open, obs)
+                    j_open, j_weak = cut_candidates(target, own, lo, M, xs, xr1, c_right, n)
+                    j_open = group_max(j_open, red_o, lane)
+                    j_weak = group_max(j_weak, red_f, lane)
+
+            # The trailing window's cut: granules lo..new_lo-1 leave it with the potential of the contacts
+            # among them (the contact at the new edge is open, or holds less than CUT_FORCE).
+            new_lo = lo
+            if j_open >= 0:
+                new_lo = j_open + 1
+            elif j_weak >= 0:
+                new_lo = j_weak + 1
+            if new_lo > lo:
+                u = 0.0
+                for s in range(G):
+                    i = own + s
+                    if i >= lo and i < new_lo - 1:
+                        d = xs[s] - (xs[s + 1] if s < G - 1 else xr1)
+                        if d > 0.0:
+                            u += c_right[s] * d ** n / n  # Eq. (hertz-1)
+                frozen += group_sum(u, red_e, lane)
+                lo = new_lo
+
+            for s in range(G):
+                x[s] = xs[s]
+                v[s] = vs[s]
+                a0[s] = a3[s] if own + s >= lo else 0.0
+            t = t_new
+            n_acc += 1
+
+            # The stop rule (``kernels.stop.end_of_step``), from the tail granules every thread read.
+            if stop_at_exit:
+                out_now = False
+                if wall:
+                    out_now = x_m2 - x_m1 <= 0.0 and v_m2 < 0.0
+                elif x_m2 - x_m1 <= 0.0 and v_m1 > 0.0 and v_m2 < v_m1:
+                    # ``pulse_has_left``: no granule at least RATTLER_MASS_RATIO as heavy as the last outruns it.
+                    blocked = 0
+                    m_min = RATTLER_MASS_RATIO * m_last
+                    for s in range(G):
+                        i = own + s
+                        if i >= lo and i < M - 1 and v[s] >= v_m1 and mass[s] >= m_min:
+                            blocked = 1
+                    out_now = group_max(blocked, red_b, lane) == 0
+                if out_now:
+                    if exit_since < 0.0:
+                        exit_since = t
+                    if t >= max(exit_since + exit_margin, t_needed):
+                        status = SUCCESS
+                else:
+                    exit_since = -1.0
+            if status < 0 and t == t_max:
+                status = T_MAX if stop_at_exit else SUCCESS
+            if status >= 0:
+                break
+            fac = SAFETY * max(err, 1e-10) ** -ALPHA_RKN4 * err_old ** BETA
+            fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+            h *= fac
+            err_old = max(err, 1e-4)
+
+        # The end of the run: the last instant is a peak candidate where a granule still speeds up, or a
+        # contact still compresses (``kernels.peaks.final_peaks``, ``final_force_peaks``).
+        for s in range(G):
+            i = own + s
+            if i < M:
+                hx0[i] = x[s]
+                hv0[i] = v[s]
+        sync()
+        for s in range(G):
+            i = own + s
+            q = q_of[s]
+            if i >= lo and q >= 0 and a0[s] > 0.0 and v[s] > peak_v[r, q] + peak_rtol * abs(peak_v[r, q]):
+                peak_v[r, q] = v[s]
+                peak_t[r, q] = t
+            if i >= lo and i < M - 1:
+                d = x[s] - hx0[i + 1]
+                if d > 0.0 and v[s] - hv0[i + 1] > 0.0:
+                    f = contact_force(d, c_right[s], n)
+                    if f > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
+                        peak_f[r, i] = f
+                        peak_ft[r, i] = t
+            if i < M:
+                x_out[r, i] = x[s]
+                v_out[r, i] = v[s]
+        if lane == 0:
+            status_out[r] = status
+            steps_out[r] = n_acc
+            rejected_out[r] = n_rej
+            t_end_out[r] = t
+            exit_out[r] = exit_since
+            lo_out[r] = lo
+            frozen_out[r] = frozen
+
+    return kernel
+
+
+def make_sum_kernel():
+    """The fixed-point sums of the averaged pulse over a batch: thread (g, q) adds round(v 2^bits) and
+    round(v^2 2^bits) of the successful realisations, in realisation order (integers: exact, and the
+    same sums as ``kernels.batch.accumulate_fixed_point``)."""
+
+    @cuda.jit
+    def sums(grid_v, status, scale, sum_v, sum_v2):
+        T = grid_v.shape[1]
+        K = grid_v.shape[2]
+        idx = cuda.grid(1)
+        if idx >= T * K:
+            return
+        g = idx // K
+        q = idx - g * K
+        s1 = int64(0)
+        s2 = int64(0)
+        for r in range(grid_v.shape[0]):
+            if status[r] == SUCCESS:
+                w = grid_v[r, g, q]
+                if w != 0.0:
+                    s1 += int64(rint(w * scale))
+                    s2 += int64(rint(w * w * scale))
+        sum_v[g, q] += s1
+        sum_v2[g, q] += s2
+
+    return sums
+
+
+def make_wall_sum_kernel():
+    """The wall force's fixed-point sum on the grid (``kernels.batch.accumulate_fixed_point_1d``)."""
+
+    @cuda.jit
+    def sums(grid_f, status, scale, sum_f):
+        g = cuda.grid(1)
+        if g >= grid_f.shape[1]:
+            return
+        s = int64(0)
+        for r in range(grid_f.shape[0]):
+            if status[r] == SUCCESS:
+                w = grid_f[r, g]
+                if w != 0.0:
+                    s += int64(rint(w * scale))
+        sum_f[g] += s
+
+    return sums

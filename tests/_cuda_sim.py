@@ -1,0 +1,127 @@
+"""Checks of the CUDA backend run under Numba's CUDA simulator, one per process.
+
+The simulator must be switched on (``NUMBA_ENABLE_CUDASIM=1``) before Numba's CUDA target is first
+imported, so ``tests/test_cuda.py`` runs each check here in a subprocess and reads the JSON it prints:
+``python tests/_cuda_sim.py CHECK [ARGS]``. The simulator runs a block's threads as Python threads, so
+the chains are tiny.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import numpy as np
+
+
+def batch(n_large: int, realizations: int, kind: str = "decorated", seed: int = 0):
+    """The arrays ``integrate_batch`` takes, for the first realisations of ``RandomDecorated(n_large)``."""
+    from granchain.families import RandomDecorated
+
+    family = RandomDecorated(n_large)
+    b = family.build(family.draw_batch(seed, np.arange(realizations)), kind)
+    return (np.ascontiguousarray(b.masses, dtype=float), np.ascontiguousarray(b.stiffness, dtype=float), b.n,
+            np.ascontiguousarray(b.initial_velocity, dtype=float), np.ascontiguousarray(b.observed, dtype=np.int64),
+            np.ascontiguousarray(b.recorded_contacts()))
+
+
+def outputs(R: int, K: int, C: int, T: int) -> dict:
+    return {"peak_velocity": np.zeros((R, K)), "peak_time": np.zeros((R, K)), "peak_force": np.zeros((R, C)),
+            "peak_force_time": np.zeros((R, C)), "peak_wall": np.zeros((R, 2)), "status": np.zeros(R, np.int64),
+            "n_steps": np.zeros(R, np.int64), "t_end": np.zeros(R), "energy_error": np.zeros(R),
+            "sum_v": np.zeros((T, K), np.int64), "sum_v2": np.zeros((T, K), np.int64),
+            "sum_wall": np.zeros(T, np.int64), "n_valid": np.zeros(1, np.int64), "lags": None}
+
+
+def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str = "decorated", pulse_end=None) -> dict:
+    from granchain.ensembles.run import ensemble_integrator
+    from granchain.solve.integrators import RunControls
+
+    masses, stiffness, n, v0, observed, contacts = batch(n_large, realizations, kind)
+    t_grid = np.arange(0.0, t_end, 0.5)
+    out = outputs(realizations, observed.size, contacts.size, t_grid.size)
+    backend.integrate_batch(ensemble_integrator("decorated"), masses, stiffness, n, v0, observed, contacts, t_grid=t_grid,
+                            t_max=200.0, controls=RunControls(), scale=2.0**30, out=out, pulse_end=pulse_end)
+    return {k: a.tolist() for k, a in out.items() if k != "lags"}
+
+
+def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end: float, windows: bool) -> dict:
+    """The CUDA backend and the CPU's Numba backend on the same batch: every per-realisation result and sum."""
+    from granchain.backends import get_backend
+    from granchain.backends.cuda import CudaBackend
+
+    ends = np.linspace(6.0, t_end, n_large) if windows else None  # averaged-pulse windows closing one by one
+    gpu = CudaBackend(threads, exchange=exchange)
+    first = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends)
+    again = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends)
+    cpu = run_batch(get_backend("numba"), n_large, realizations, t_end, pulse_end=ends)
+    return {"cuda": first, "again": again, "cpu": cpu}
+
+
+def versus_dop853(threads: int, wall: bool) -> dict:
+    """``simulate(..., backend="cuda")`` and DOP853 on a small decorated chain (with a wall or a free end)."""
+    import granchain as gc
+
+    chain = gc.decorated([0.3, 0.05, 0.2])
+    if wall:
+        chain = chain.with_wall()
+    grid = np.linspace(0.0, 12.0, 25)
+    from granchain.backends.cuda import CudaBackend
+
+    res = {}
+    for name, kw in (("cuda", {"integrator": gc.RKN4(1e-10, 1e-13), "backend": CudaBackend(threads)}),
+                     ("dop853", {"integrator": "dop853"})):
+        r = gc.simulate(chain, t_grid=grid, **kw)
+        res[name] = {"status": int(r.status), "peak_velocity": r.peak_velocity.tolist(), "peak_time": r.peak_time.tolist(),
+                     "grid": r.velocity.tolist(), "energy_error": float(r.energy_error),
+                     "peak_force": np.asarray(r.peak_force).tolist()}
+    return res
+
+
+def refusals() -> dict:
+    """What the CUDA backend refuses, each with the message it gives (fast: refused before any kernel)."""
+    import granchain as gc
+    from granchain.backends.cuda import CudaBackend
+
+    backend = CudaBackend(1)
+    chain = gc.decorated([0.3, 0.05])
+    cases = {
+        "dp5": lambda: gc.simulate(chain, "dp5", backend=backend),
+        "verlet": lambda: gc.simulate(chain, gc.Verlet(1e-3), backend=backend),
+        "fixed step": lambda: gc.simulate(chain, gc.RKN4(fixed_step=1e-3), backend=backend),
+        "precompression": lambda: gc.simulate(chain.with_precompression(1e-3), "rkn4", backend=backend),
+        "dissipation": lambda: gc.simulate(chain.with_dissipation(0.1), "dp5", backend=backend),
+        "sensors": lambda: gc.simulate(gc.decorated([0.3, 0.05, 0.3]), "rkn4", backend=backend, sensors=[2],
+                                       t_grid=np.linspace(0, 5, 6)),
+        "aligned pulse": lambda: gc.run_ensemble(3, realizations=2, chains="decorated", backend=backend, progress=False,
+                                                 pulse_window="full", lags=np.arange(-1.0, 1.05, 0.5)),
+    }
+    got = {}
+    for name, call in cases.items():
+        try:
+            call()
+            got[name] = "accepted"
+        except ValueError as exc:
+            got[name] = str(exc)
+    return got
+
+
+def unavailable() -> dict:
+    """Without the simulator and without a GPU: the error a user gets."""
+    from granchain.backends import BackendUnavailable, get_backend
+
+    try:
+        get_backend("cuda")
+    except BackendUnavailable as exc:
+        return {"error": str(exc)}
+    return {"error": None}
+
+
+CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "refusals": refusals, "unavailable": unavailable}
+
+if __name__ == "__main__":
+    name, args = sys.argv[1], [json.loads(a) for a in sys.argv[2:]]
+    if name != "unavailable" and os.environ.get("NUMBA_ENABLE_CUDASIM") != "1":
+        sys.exit("run with NUMBA_ENABLE_CUDASIM=1")
+    print("RESULT " + json.dumps(CHECKS[name](*args)))

@@ -1,0 +1,68 @@
+"""``benchmarks/bench_gpu.py --smoke`` under Numba's CUDA simulator: the GPU benchmark runs once on a
+machine with a GPU and no second chance, so its every part is checked here at tiny sizes (N = 4, a few
+realisations; the CUDA backend and the naive peer run in the simulator). Slow: about a minute."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "benchmarks" / "bench_gpu.py"
+
+#: The line each part prints once it has measured (an error or skip line does not count).
+PART_LINES = {
+    "machine": r"^\[machine\] device CUDA simulator",
+    "1 compile": r"^\[1 compile\] decorated N=4 L=32: warm-up",
+    "1 gpu L=32": r"^\[1 gpu\] decorated N=4 L=32: .*integration [\d.]+ s",
+    "1 gpu L=64": r"^\[1 gpu\] decorated N=4 L=64: .*integration [\d.]+ s",
+    "1 gpu L=1": r"^\[1 gpu\] decorated N=4 L=1: .*integration [\d.]+ s",
+    "1 gpu effective": r"^\[1 gpu\] effective N=4 L=32: .*integration [\d.]+ s",
+    "2 peer": r"^\[2 peer\] naive thread-per-chain velocity Verlet.*kernel [\d.]+ s.*granchain [\d.]+x faster",
+    "2 accuracy": r"^\[2 accuracy\] peer vs the GPU backend .*largest relative peak-velocity difference",
+    "3 cpu decorated": r"^\[3 cpu\] CPU decorated N=4, threads=\d+.*GPU L=32 / CPU-\d+: [\d.]+x",
+    "3 cpu effective": r"^\[3 cpu\] CPU effective N=4, threads=\d+",
+    "3 threads": r"^\[3 threads\] CPU decorated N=4,  1 threads.*speed-up over 1 thread 1\.00x",
+    "4 reproduce": r"^\[4 reproduce\] `granchain reproduce .*wall [\d.]+ s",
+    "5 agree decorated": r"^\[5 agree\] decorated N=4, .*within the contract",
+    "5 agree effective": r"^\[5 agree\] effective N=4, .*within the contract",
+    "summary": r"^\[summary\] decorated integration +<= 1.5 s: (PASS|FAIL) ",
+    "summary total": r"^\[summary\] total [\d.]+ s",
+}
+
+
+def missing_lines(text: str) -> list:
+    """The parts of :data:`PART_LINES` whose line ``text`` lacks, and every error line of a part."""
+    missing = [name for name, pattern in PART_LINES.items() if not re.search(pattern, text, re.MULTILINE)]
+    errors = re.findall(r"^\[\d [\w ]*error\].*$", text, re.MULTILINE)
+    return missing + errors
+
+
+@pytest.fixture(scope="module")
+def smoke_output():
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
+    out = subprocess.run([sys.executable, str(SCRIPT), "--smoke"], capture_output=True, text=True, cwd=ROOT, env=env,
+                         timeout=600)
+    return out
+
+
+@pytest.mark.slow
+def test_smoke_run_prints_every_part(smoke_output):
+    assert smoke_output.returncode == 0, smoke_output.stderr[-3000:]
+    assert missing_lines(smoke_output.stdout) == [], smoke_output.stdout + smoke_output.stderr[-3000:]
+
+
+@pytest.mark.slow
+def test_a_missing_or_failed_part_is_noticed(smoke_output):
+    """Negative control of the check above: the smoke run's output without part 3's lines, or with a part's
+    error line, is reported."""
+    text = smoke_output.stdout
+    without = "\n".join(line for line in text.splitlines() if not line.startswith("[3 "))
+    assert {"3 cpu decorated", "3 cpu effective", "3 threads"} <= set(missing_lines(without))
+    failed = text + "\n[2 peer error] CudaSupportError: no device\n"
+    assert missing_lines(failed) == ["[2 peer error] CudaSupportError: no device"]

@@ -1,0 +1,107 @@
+"""The CUDA backend, run under Numba's CUDA simulator (no GPU needed: CI has none).
+
+Each check runs in a subprocess (``tests/_cuda_sim.py``): the simulator must be switched on before
+Numba's CUDA target is imported. The simulator runs the kernels' arithmetic in Python, without the
+GPU's fused multiply-adds, so there the GPU kernels must reproduce the CPU kernels' numbers to
+rounding: a test that checks them against each other within 1e-12 catches any difference in method,
+step control, window, peak search or stop rule. On a GPU they agree within the accuracy contract
+(``benchmarks/bench_gpu.py`` measures it on 1,000 chains of each kind). The simulator is slow (a minute
+to several per check), so the kernel checks are marked ``slow``; the refusals run with the fast tests.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba.cuda")
+
+HERE = Path(__file__).resolve().parent
+
+
+def sim(check: str, *args, simulator: bool = True, timeout: float = 900) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
+    if simulator:
+        env["NUMBA_ENABLE_CUDASIM"] = "1"
+    proc = subprocess.run([sys.executable, str(HERE / "_cuda_sim.py"), check, *map(json.dumps, args)], env=env,
+                          capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = next(x for x in proc.stdout.splitlines() if x.startswith("RESULT "))
+    return json.loads(line[len("RESULT "):])
+
+
+def assert_same_run(gpu: dict, cpu: dict) -> None:
+    """Every per-realisation result within rounding and the fixed-point sums equal (the CPU kernels' numbers)."""
+    for key in ("status", "n_steps", "n_valid"):
+        assert gpu[key] == cpu[key], key
+    for key in ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "t_end"):
+        np.testing.assert_allclose(gpu[key], cpu[key], rtol=1e-12, atol=1e-14, err_msg=key)
+    np.testing.assert_allclose(gpu["energy_error"], cpu["energy_error"], rtol=0, atol=1e-12)
+    for key in ("sum_v", "sum_v2"):
+        assert np.max(np.abs(np.subtract(gpu[key], cpu[key]))) <= 2, key  # a rounding of one term at most
+
+
+@pytest.mark.slow
+def test_thread_per_chain_reproduces_the_cpu_kernels_with_averaged_pulse_windows():
+    """One thread per chain (no exchange between threads), N = 8 with the trailing window cutting behind
+    the front and averaged-pulse windows closing: the CPU kernels' results; a second run is bitwise the first."""
+    res = sim("compare", 1, "shared", 8, 3, 30.0, True)
+    assert_same_run(res["cuda"], res["cpu"])
+    assert res["again"] == res["cuda"]
+    assert res["cpu"]["n_valid"] == [3]
+
+
+@pytest.mark.slow
+def test_granules_spread_over_threads_exchange_through_shared_memory():
+    """Four threads per chain, two granules each: the contact forces, error norm, peak candidates, the
+    window's cut and the stop rule cross thread boundaries through shared memory."""
+    res = sim("compare", 4, "shared", 4, 1, 16.0, False)
+    assert_same_run(res["cuda"], res["cpu"])
+
+
+@pytest.mark.slow
+def test_one_warp_per_chain_exchanges_by_shuffles():
+    """The GPU's layout (32 threads, warp shuffles; emulated in the simulator): the CPU kernels' results."""
+    res = sim("compare", 32, "shuffle", 2, 1, 6.0, False)
+    assert_same_run(res["cuda"], res["cpu"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("wall", [False, True], ids=["free end", "wall"])
+def test_single_chain_against_dop853(wall):
+    """``simulate(backend=...)`` on the GPU backend against SciPy's DOP853 (an independent integrator):
+    peaks, grid velocities and (with a wall) the wall's peak force within the accuracy contract."""
+    res = sim("versus_dop853", 1, wall)
+    gpu, ref = res["cuda"], res["dop853"]
+    assert gpu["status"] == ref["status"] == 0
+    np.testing.assert_allclose(gpu["peak_velocity"], ref["peak_velocity"], rtol=1e-6)
+    np.testing.assert_allclose(gpu["peak_time"][1:-1], ref["peak_time"][1:-1], atol=1e-5)
+    np.testing.assert_allclose(gpu["grid"], ref["grid"], atol=1e-6)
+    np.testing.assert_allclose(gpu["peak_force"], ref["peak_force"], rtol=1e-6)
+    assert abs(gpu["energy_error"]) < 1e-8
+
+
+def test_what_it_cannot_run_is_refused_naming_the_cpu_backend():
+    got = sim("refusals")
+    for case, message in got.items():
+        assert message != "accepted", case
+        assert "backend='cpu'" in message, (case, message)
+
+
+def test_without_a_gpu_the_error_says_what_to_do():
+    try:
+        from numba import cuda
+
+        if cuda.is_available():
+            pytest.skip("a GPU is present")
+    except Exception:  # noqa: BLE001
+        pass
+    got = sim("unavailable", simulator=False)
+    assert got["error"] is not None
+    assert "backend='cpu'" in got["error"] and "granchain[cuda]" in got["error"]
