@@ -224,3 +224,31 @@ def test_validity_and_reproduce_pass_the_backend_on(tmp_path):
     (ds4,) = reproduce.run_ensembles(tmp_path / "r", 10, 1, Ns=(4,), progress=False, log=lambda *_: None,
                                      backend=fake).values()
     assert fake.calls and json.loads(ds4.attrs["granchain_parameters"])["backend"] == "fake"
+
+
+class RknOnly(Fake):
+    """A backend that declares the one method it has kernels for, as the GPU backend does."""
+
+    name = "rkn-only"
+    methods = ("rkn4",)
+
+
+def test_a_backend_with_fewer_methods_gets_rkn4_for_the_kinds_whose_default_it_lacks():
+    """The effective chains' default is DP5; on a backend that runs RKN4 alone they get the decorated chains'
+    default, RKN4 (recorded); an integrator the caller names is kept (and refused by the backend if it must)."""
+    spec = EnsembleSpec(FAMILY, realizations=4, backend=RknOnly())
+    assert {k: i.name for k, i in spec.chain_integrators.items()} == {"decorated": "rkn4", "effective": "rkn4"}
+    assert spec.chain_integrators["effective"] == EnsembleSpec(FAMILY, realizations=4).chain_integrators["decorated"]
+    assert EnsembleSpec(FAMILY, realizations=4).chain_integrators["effective"].name == "dp5"  # negative control
+    named = EnsembleSpec(FAMILY, realizations=4, backend=RknOnly(), integrator="dp5")
+    assert {i.name for i in named.chain_integrators.values()} == {"dp5"}
+
+
+def test_a_design_on_a_backend_without_its_default_method_uses_rkn4():
+    from granchain.design import TaperedSpace
+    from granchain.design.evaluate import BatchEvaluator
+
+    space = TaperedSpace(6, (0.0, 0.2), wall=False)
+    assert BatchEvaluator(space, "transmitted-energy").integrator.name == "dp5"  # negative control
+    on = BatchEvaluator(space, "transmitted-energy", backend=RknOnly())
+    assert on.integrator.name == "rkn4" and on.describe()["backend"] == "rkn-only"

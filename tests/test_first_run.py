@@ -290,11 +290,12 @@ def test_ensembles_start_the_helper_only_where_dp5_comes_second(monkeypatch):
     """``run_ensemble`` asks for a helper compiling DP5 (the paper's chain) when it integrates another
     method first and DP5 later, on this machine: the defaults for both chains of the paper's family.
     Not for one chain kind, DP5 for all, real contacts (another entry point) or a cluster."""
+    from granchain.backends import warm
     from granchain.ensembles import run as run_module
     from granchain.ensembles.run import EnsembleSpec
 
     asked = []
-    monkeypatch.setattr(run_module.warm, "compile_elsewhere", lambda job: asked.append(job))
+    monkeypatch.setattr(warm, "compile_elsewhere", lambda job: asked.append(job))
 
     def asks(family, client=None, **kw) -> bool:
         asked.clear()

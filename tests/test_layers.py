@@ -78,12 +78,7 @@ RULES: dict[str, dict[str, frozenset | None]] = {
 
 #: Known breaches, each with why it stays for now: (importing module or package, imported module or
 #: package, why). Prefixes: a module split later into several is still covered.
-EXCEPTIONS = [
-    ("granchain.ensembles.run", "granchain.backends.warm",
-     "run_ensemble starts a helper process compiling DP5 into Numba's cache (a first ensemble of both of the "
-     "paper's chains): Numba-specific work that belongs behind a backend method (\"prepare these integrators\") "
-     "of the abstract backend seam still to come"),
-]
+EXCEPTIONS: list = []
 
 
 def module_name(path: Path, package: Path = PACKAGE) -> str:

@@ -108,6 +108,14 @@ class Backend:
             raise ValueError(f"the {self.name} backend has no code for the contact law {chain.contact!r}; it runs "
                              f"{', '.join(law.__name__ for law in self.contact_laws)}")
 
+    def prepare(self, integrators):
+        """Start what makes the later of ``integrators`` (in the order a run uses them) ready sooner, e.g. a
+        compilation in another process; returns a handle for :meth:`release` (None: nothing started)."""
+        return None
+
+    def release(self, handle) -> None:
+        """Stop what :meth:`prepare` started, if it still runs."""
+
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state); returns
         (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c) (see ``Integrator.integrate``)."""

@@ -170,6 +170,11 @@ class BatchEvaluator:
         self.objective.check(space.wall)
         self.objective.bind(space.granules)  # e.g. a sensor's contact must exist in these chains
         self.integrator = default_integrator(space) if integrator is None else get_integrator(integrator)
+        methods = getattr(_backend.resolve(self.backend), "methods", None)
+        if integrator is None and methods is not None and self.integrator.name not in methods:
+            # a backend without a kernel for the default (the GPU runs RKN4 alone): the decorated chains' method,
+            # every granule to the end, valid for every elastic chain (recorded in describe())
+            self.integrator = ensemble_integrator("decorated", windowed=False)
         self.statistic = _check_statistic(statistic)
         self.client = client
 

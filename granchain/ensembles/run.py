@@ -22,7 +22,6 @@ import numpy as np
 
 from .._validate import count
 from .._version import RESULTS_VERSION
-from ..backends import warm
 from ..families import ChainFamily, RandomDecorated
 from ..model.chain import HERTZ
 from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
@@ -680,11 +679,12 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     threads = _threads(threads)
     if not isinstance(resume, (bool, np.bool_)):
         raise ValueError(f"resume must be True or False, got {resume!r}")
-    helper = _compile_ahead(spec, client)
+    prepared, helper = _compile_ahead(spec, client)
     try:
         return _run(spec, out, resume, client, threads, _Progress(spec, progress))
     finally:
-        warm.stop(helper)
+        if prepared is not None:
+            prepared.release(helper)
 
 
 def _run(spec: EnsembleSpec, out, resume: bool, client, threads, report) -> xarray.Dataset:
@@ -727,16 +727,17 @@ def _run(spec: EnsembleSpec, out, resume: bool, client, threads, report) -> xarr
 
 
 def _compile_ahead(spec: EnsembleSpec, client):
-    """A helper process compiling DP5's entry point (:mod:`granchain.backends.warm`) when this run
-    integrates the paper's chains with another method first and DP5 later (the defaults: RKN4 for the
-    decorated chains, then DP5 for the effective ones), so that a first run compiles the two on two
-    cores; None otherwise, and with a cluster, whose workers compile for themselves."""
+    """(backend, handle): the first integrator's backend asked to prepare the run's integrators in the
+    order it uses them (``Backend.prepare``: the Numba backend compiles DP5 in a helper process while this
+    one compiles RKN4, the paper's defaults); (None, None) with a cluster, whose workers compile for
+    themselves, for real contacts (other entry points) and on a chosen backend."""
     if client is not None or spec.family.model() is not None or spec.backend is not None:
-        return None
-    first, *later = (spec.chain_integrators[c].name for c in spec.chains)  # (RKN4 is a subclass of DP5)
-    if first == DP5.name or DP5.name not in later:
-        return None
-    return warm.compile_elsewhere("dp5")
+        return None, None
+    from ..backends import get_backend
+
+    integrators = [spec.chain_integrators[c] for c in spec.chains]
+    backend = get_backend(integrators[0].backend)
+    return backend, backend.prepare(integrators)
 
 
 def _with_pulse_windows(spec: EnsembleSpec, out, threads, report) -> EnsembleSpec:
