@@ -1,6 +1,7 @@
 """``benchmarks/bench_gpu.py --smoke`` under Numba's CUDA simulator: the GPU benchmark runs once on a
 machine with a GPU and no second chance, so its every part is checked here at tiny sizes (N = 4, a few
-realisations; the CUDA backend and the naive peer run in the simulator). Slow: about a minute."""
+realisations; the CUDA backend and the naive peer run in the simulator; the smoke run's layouts are those
+the simulator runs quickly: ``tests/test_cuda.py`` checks the warp-shuffle one). Slow: about a minute."""
 
 from __future__ import annotations
 
@@ -18,11 +19,10 @@ SCRIPT = ROOT / "benchmarks" / "bench_gpu.py"
 #: The line each part prints once it has measured (an error or skip line does not count).
 PART_LINES = {
     "machine": r"^\[machine\] device CUDA simulator",
-    "1 compile": r"^\[1 compile\] decorated N=4 L=32: warm-up",
-    "1 gpu L=32": r"^\[1 gpu\] decorated N=4 L=32: .*integration [\d.]+ s",
-    "1 gpu L=64": r"^\[1 gpu\] decorated N=4 L=64: .*integration [\d.]+ s",
-    "1 gpu L=1": r"^\[1 gpu\] decorated N=4 L=1: .*integration [\d.]+ s",
-    "1 gpu effective": r"^\[1 gpu\] effective N=4 L=32: .*integration [\d.]+ s",
+    "1 compile": r"^\[1 compile\] decorated N=4 L=32/shared: warm-up",
+    "1 gpu L=32/shared": r"^\[1 gpu\] decorated N=4 L=32/shared \(shared exchange.*integration [\d.]+ s",
+    "1 gpu L=1": r"^\[1 gpu\] decorated N=4 L=1 \(shared exchange.*integration [\d.]+ s",
+    "1 gpu effective": r"^\[1 gpu\] effective N=4 L=32/shared \(shared exchange.*integration [\d.]+ s",
     "2 peer": r"^\[2 peer\] naive thread-per-chain velocity Verlet.*kernel [\d.]+ s.*granchain [\d.]+x faster",
     "2 accuracy": r"^\[2 accuracy\] peer vs the GPU backend .*largest relative peak-velocity difference",
     "3 cpu decorated": r"^\[3 cpu\] CPU decorated N=4, threads=\d+.*GPU L=32 / CPU-\d+: [\d.]+x",
