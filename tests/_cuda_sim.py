@@ -46,15 +46,17 @@ def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str 
     return {k: a.tolist() for k, a in out.items() if k != "lags"}
 
 
-def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end: float, windows: bool) -> dict:
-    """The CUDA backend and the CPU's Numba backend on the same batch: every per-realisation result and sum."""
+def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end: float, windows: bool,
+            repeat: bool = False) -> dict:
+    """The CUDA backend and the CPU's Numba backend on the same batch: every per-realisation result and sum
+    (``repeat``: the GPU run twice, ``"again"`` the second; else ``"again"`` is None)."""
     from granchain.backends import get_backend
     from granchain.backends.cuda import CudaBackend
 
     ends = np.linspace(6.0, t_end, n_large) if windows else None  # averaged-pulse windows closing one by one
     gpu = CudaBackend(threads, exchange=exchange)
     first = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends)
-    again = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends)
+    again = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends) if repeat else None
     cpu = run_batch(get_backend("numba"), n_large, realizations, t_end, pulse_end=ends)
     return {"cuda": first, "again": again, "cpu": cpu}
 

@@ -51,7 +51,7 @@ def assert_same_run(gpu: dict, cpu: dict) -> None:
 def test_thread_per_chain_reproduces_the_cpu_kernels_with_averaged_pulse_windows():
     """One thread per chain (no exchange between threads), N = 8 with the trailing window cutting behind
     the front and averaged-pulse windows closing: the CPU kernels' results; a second run is bitwise the first."""
-    res = sim("compare", 1, "shared", 8, 3, 30.0, True)
+    res = sim("compare", 1, "shared", 8, 3, 30.0, True, True)
     assert_same_run(res["cuda"], res["cpu"])
     assert res["again"] == res["cuda"]
     assert res["cpu"]["n_valid"] == [3]
