@@ -121,7 +121,7 @@ class NumbaBackend(Backend):
                              "use DOP853 (integrator='dop853'), which integrates every granule")
 
     def prepare(self, integrators):
-        """A helper process compiling DP5's entry point (:mod:`granchain.backends.warm`) when a run integrates
+        """A helper process compiling DP5's entry point (``granchain.backends.warm``) when a run integrates
         the paper's chains with another method first and DP5 later (the ensembles' defaults: RKN4 for the
         decorated chains, then DP5 for the effective ones), so that a first run compiles the two on two
         cores; None otherwise."""

@@ -149,7 +149,7 @@ class EnsembleSpec:
     #: {chain kind: window ends (K,)} once set (``pulse_window.window_ends``, or a store's record); None before.
     pulse_ends: dict | None = field(default=None, repr=False)
     #: What computes the chunks: None (or "cpu"): each integrator's own backend; a backend's name ("cuda",
-    #: "numba") or a ``granchain.backends.Backend``: its ``integrate_batch`` (:mod:`granchain.ensembles.backend`).
+    #: "numba") or a ``granchain.backends.Backend``: its ``integrate_batch`` (``granchain.ensembles.backend``).
     backend: object = None
     #: Every backend that computed the store's chunks, in the order first used (``run_ensemble(
     #: switch_backend=True)``; the record's ``"backend"`` is the first); None: ``backend`` alone.
