@@ -42,6 +42,7 @@ from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
 
 # The method's tables, the step control's constants and the stop and window rules: the CPU kernels' own
 # numbers (one source; the GPU code below is the CPU's written for CUDA).
+from ..kernels import dense as _dense
 from ..kernels.rkloop import ALPHA_RKN4, BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN
 from ..kernels.rkn4 import (
     A10,
@@ -183,13 +184,8 @@ def falls(f0, f1):
     return f0 > 0.0 and f1 <= 0.0
 
 
-@cuda.jit(device=True)
-def hermite_max_estimate(d0, w0, d1, w1, h):
-    """``kernels.dense.hermite_max_estimate``: a cheap estimate of a compression maximum inside a step."""
-    theta = w0 / (w0 - w1)
-    t2 = theta * theta
-    t3 = t2 * theta
-    return (2 * t3 - 3 * t2 + 1) * d0 + (t3 - 2 * t2 + theta) * h * w0 + (-2 * t3 + 3 * t2) * d1 + (t3 - t2) * h * w1
+#: ``kernels.dense.hermite_max_estimate`` (plain arithmetic): the CPU's own function compiled for the GPU.
+hermite_max_estimate = cuda.jit(device=True)(_dense.hermite_max_estimate.py_func)
 
 
 @cuda.jit(device=True)
