@@ -25,7 +25,6 @@ import dataclasses
 
 import numpy as np
 
-from ..model.contacts import PowerLaw
 
 __all__ = ["Backend", "BackendUnavailable", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run", "final_energy_momentum"]
 
@@ -95,8 +94,10 @@ class Backend:
     override it with a parallel kernel)."""
 
     name: str = ""
-    #: The contact laws this backend has code for (exact types: a subclass may change the force).
-    contact_laws: tuple = (PowerLaw,)
+    #: The force forms of the contact laws this backend has code for (``ContactLaw.form``, read from the
+    #: law's own class: a subclass that does not declare its form again may have changed the force, and
+    #: is refused); None: any law (code that calls the law's own NumPy methods).
+    law_forms: tuple | None = ("power-law",)
 
     def check(self, integrator, chain) -> None:
         """Refuse an integrator whose requirements the chain's model does not meet, and a contact law
@@ -104,9 +105,9 @@ class Backend:
         if integrator.needs_conservative_forces and not chain.contact.conservative:
             raise ValueError(f"{integrator.name} integrates x'' = f(x) and needs forces that depend on positions only; "
                              f"the contact law {chain.contact!r} depends on velocities: use DP5 or DOP853")
-        if type(chain.contact) not in self.contact_laws:
+        if self.law_forms is not None and type(chain.contact).__dict__.get("form") not in self.law_forms:
             raise ValueError(f"the {self.name} backend has no code for the contact law {chain.contact!r}; it runs "
-                             f"{', '.join(law.__name__ for law in self.contact_laws)}")
+                             f"the laws of forms {', '.join(self.law_forms)}")
 
     def prepare(self, integrators):
         """Start what makes the later of ``integrators`` (in the order a run uses them) ready sooner, e.g. a

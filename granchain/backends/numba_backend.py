@@ -14,11 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.contacts import PowerLaw, Viscoelastic
 from . import Backend, aligned_outputs, batch_chain, effective_integrator, warm
 from .kernels.batch import integrate_batch, row_records, thread_sums
 from .kernels.dispatch import chain_kernel, integrate_chain, kernel_function
-from .kernels.forces import power_code
+from .kernels.forces import DAMPING_KUWABARA_KONO, LAW_FORMS, power_code
 from .kernels.records import (
     INFO_SIZE,
     KIND_DP5,
@@ -70,8 +69,11 @@ def method_record(integrator) -> Method:
 def model_params(chain) -> Params:
     """The kernels' ``Params`` of ``chain``: the scalars its model declares (contact law, boundary,
     static load). The one place a new physics parameter is filled in."""
-    return Params(float(chain.n), power_code(chain.n), chain.boundary.wall, float(chain.contact.gamma),
-                  float(chain.static_force), bool(getattr(chain.contact, "clamp", True)))
+    law = chain.contact
+    # a law of no compiled form (run by the SciPy backend) gets the default code: the energies read none
+    damping = LAW_FORMS.get(type(law).__dict__.get("form"), DAMPING_KUWABARA_KONO)
+    return Params(float(chain.n), power_code(chain.n), chain.boundary.wall, float(law.gamma), float(chain.static_force),
+                  bool(law.clamp), damping)
 
 
 def model_record(chain) -> Model:
@@ -108,7 +110,7 @@ class NumbaBackend(Backend):
     """Compiled kernels (Numba) for DP5, RKN4 and Verlet; batches run in parallel threads."""
 
     name = "numba"
-    contact_laws = (PowerLaw, Viscoelastic)
+    law_forms = tuple(LAW_FORMS)
 
     def check(self, integrator, chain) -> None:
         """Besides :meth:`Backend.check`: the kernels integrate only the granules the pulse has reached

@@ -21,7 +21,7 @@ from scipy.integrate import DOP853 as _SciPyDOP853
 from scipy.optimize import brentq
 
 from .._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
-from ..model.contacts import PowerLaw, Viscoelastic
+from ..model.contacts import PowerLaw
 from . import Backend
 from .kernels.peaks import write_info
 from .kernels.records import INFO_SIZE
@@ -33,25 +33,21 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
     Eq. (motion_rescaled), vectorised with NumPy; returns (rhs, forces) with forces(x, v) the contacts'
     total forces (static load included).
 
-    ``law`` is the chain's contact law (``granchain.model.contacts.PowerLaw`` or ``Viscoelastic``; its
-    NumPy ``force``); ``static_force`` F0 > 0 precompresses the chain: x are displacements from the
+    ``law`` is the chain's contact law (any ``granchain.model.contacts.ContactLaw``: its NumPy ``force``); ``static_force`` F0 > 0 precompresses the chain: x are displacements from the
     static state, each contact has the overlap delta0 = (F0 / c)^(1/(n-1)) and the accelerations come
     from the forces less their static values (the external load balances them at the ends)."""
     M = masses.size
-    gamma = getattr(law, "gamma", 0.0)
-    clamp = getattr(law, "clamp", True)  # the viscoelastic force clamped at 0 (default) or pulling (published law)
+    law = PowerLaw(n) if law is None else law
+    damped = law.dissipates
     with np.errstate(divide="ignore"):
         d0 = (static_force / stiffness) ** (1.0 / (n - 1.0)) if static_force > 0 else np.zeros(M - 1)
     f0 = np.where(d0 > 0.0, stiffness * d0 ** (n - 1.0), 0.0)
 
     def forces(x, v=None):
         d = d0 + (x[:-1] - x[1:])
-        if gamma > 0.0:
-            w = v[:-1] - v[1:]
-            dp = np.where(d > 0.0, d, 0.0)
-            f = stiffness * dp ** (n - 2.0) * (dp + gamma * w)
-            return np.where(d > 0.0, np.maximum(f, 0.0) if clamp else f, 0.0)
-        return np.where(d > 0.0, stiffness * np.abs(d) ** (n - 1.0), 0.0)
+        if damped:
+            return law.force(d, stiffness, v[:-1] - v[1:])
+        return law.force(d, stiffness)
 
     def rhs(t, y):
         x, v = y[:M], y[M:2 * M]
@@ -60,22 +56,14 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
         a = np.zeros(M)
         a[1:] += G
         a[:-1] -= G
-        if gamma > 0.0:  # the power taken from the motion: (F - F_elastic) w
+        if damped:  # the power taken from the motion: (F - F_elastic) w
             d = d0 + (x[:-1] - x[1:])
-            el = np.where(d > 0.0, stiffness * np.abs(d) ** (n - 1.0), 0.0)
+            el = law.elastic_force(d, stiffness)
             power = np.sum(np.where(d > 0.0, (F - el) * (v[:-1] - v[1:]), 0.0))
             return np.concatenate((v, a / masses, [power]))
         return np.concatenate((v, a / masses))
 
     return rhs, forces
-
-
-def _force_rate(d, w, dw, c, n, gamma):
-    """d/dt of the viscoelastic force c d^(n-2) (d + gamma w) at compression d, rate w and relative
-    acceleration dw (0 where the force is 0)."""
-    if d <= 0.0 or d + gamma * w <= 0.0:
-        return 0.0
-    return c * ((n - 1.0) * d ** (n - 2.0) * w + gamma * ((n - 2.0) * d ** (n - 3.0) * w * w + d ** (n - 2.0) * dw))
 
 
 def _first_nonpositive(f, t0, t1):
@@ -112,9 +100,9 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     """Same contract as the compiled kernels; returns (status, info, peak_v, peak_t, grid_v, x, v, peak_f, peak_ft,
     grid_f, grid_c)."""
     M = masses.size
+    law = PowerLaw(n) if law is None else law
     rhs, law_forces = chain_rhs(masses, stiffness, n, law, static_force)
-    gamma = getattr(law, "gamma", 0.0)
-    damped = gamma > 0.0
+    damped = law.dissipates
     sensed = np.asarray(sensed, dtype=np.int64)
     wall = bool(np.isinf(masses[-1]))
     y0 = np.concatenate((x0, v0, [0.0])) if damped else np.concatenate((x0, v0))
@@ -171,12 +159,12 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
             def rate(s, j):
                 z = dense(s)
                 a = accel(z)
-                return _force_rate(d0[j] + z[j] - z[j + 1], z[M + j] - z[M + j + 1], a[j] - a[j + 1], stiffness[j], n, gamma)
+                return law.force_rate(d0[j] + z[j] - z[j + 1], z[M + j] - z[M + j + 1], a[j] - a[j + 1], stiffness[j])
 
             for j in range(M - 1):
-                r0 = _force_rate(d0[j] + y_old[j] - y_old[j + 1], v_old[j] - v_old[j + 1], a_old[j] - a_old[j + 1],
-                                 stiffness[j], n, gamma)
-                r1 = _force_rate(d0[j] + y[j] - y[j + 1], w_new[j], a_new[j] - a_new[j + 1], stiffness[j], n, gamma)
+                r0 = law.force_rate(d0[j] + y_old[j] - y_old[j + 1], v_old[j] - v_old[j + 1], a_old[j] - a_old[j + 1],
+                                    stiffness[j])
+                r1 = law.force_rate(d0[j] + y[j] - y[j + 1], w_new[j], a_new[j] - a_new[j + 1], stiffness[j])
                 if r0 > 0.0 and r1 <= 0.0:
                     tp = _first_nonpositive(lambda s, j=j: rate(s, j), t0, t1)
                     fp = forces(dense(tp))[j]
@@ -245,7 +233,9 @@ class ScipyBackend(Backend):
 
     name = "scipy"
 
-    contact_laws = (PowerLaw, Viscoelastic)
+    #: Any contact law: the right-hand side and the force peaks are the law's own NumPy code
+    #: (``ContactLaw.force``, ``force_rate``), nothing compiled.
+    law_forms = None
 
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         self.check(integrator, chain)

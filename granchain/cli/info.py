@@ -134,8 +134,9 @@ def _backend_line(backend: str, used: list | None) -> str:
 def _contacts_line(family: dict) -> str:
     """The family's contacts in words: the paper's, or the real contacts its record holds."""
     parts = []
-    law = family.get("contact") or (family.get("contact_model") if family.get("contact_model", {}).get("law") == "viscoelastic" else None)
-    parts.append(f"viscoelastic, gamma = {law['gamma']:.6g}" if law else f"elastic power law, n = {family.get('n', 2.5):g}")
+    law = family.get("contact") or (family.get("contact_model")
+                                    if family.get("contact_model", {}).get("law") not in (None, "power-law") else None)
+    parts.append(f"{law['law']}, gamma = {law['gamma']:.6g}" if law else f"elastic power law, n = {family.get('n', 2.5):g}")
     f0 = family.get("static_force") or family.get("contact_model", {}).get("static_force")
     parts.append(f"precompressed by F0 = {f0:.6g}" if f0 else "unloaded")
     m = family.get("striker_mass") or family.get("contact_model", {}).get("striker_mass")

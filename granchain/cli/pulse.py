@@ -219,7 +219,7 @@ def run(args) -> int:
             print(_wall_summary(result, units))
         if sensors is not None:
             print(_sensor_summary(result, units))
-        if chain.contact.gamma > 0:
+        if chain.contact.dissipates:
             e = f"# dissipated energy {result.dissipated_energy:.6g} of {chain.energy:.6g} (rescaled)"
             if units is not None:
                 e += f"; {result.dissipated_energy * units.energy:.6g} J"

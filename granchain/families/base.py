@@ -19,7 +19,7 @@ import numpy as np
 
 from .._validate import finite_scalar
 from ..model.chain import Chain
-from ..model.contacts import PowerLaw, Precompression, Viscoelastic
+from ..model.contacts import ContactLaw, PowerLaw, Precompression
 from ..model.random import realization_rng
 from .batch import ChainBatch, _add_striker
 
@@ -52,7 +52,7 @@ class ChainFamily:
     :attr:`size`, :attr:`n_observed` and :meth:`granule_coordinate`.
 
     The real contacts the chains share (the concrete families have these fields): ``contact``, the
-    contact law (None: ``PowerLaw(n)``, the paper's; or a :class:`granchain.Viscoelastic`),
+    contact law (None: ``PowerLaw(n)``, the paper's; or another ``granchain.model.contacts.ContactLaw``),
     ``static_force`` (the precompression F0, 0: none) and ``striker_mass`` (None: granule 1 struck
     with velocity 1; else a free sphere of that mass, rescaled, struck instead, one material).
     """
@@ -68,8 +68,9 @@ class ChainFamily:
     def _validate_model(self) -> None:
         law = self.contact
         if law is not None:
-            if not isinstance(law, (PowerLaw, Viscoelastic)):
-                raise ValueError(f"contact must be a granchain.PowerLaw or granchain.Viscoelastic law (or None), got {law!r}")
+            if not isinstance(law, ContactLaw):
+                raise ValueError(f"contact must be a contact law (granchain.PowerLaw, granchain.Viscoelastic, ...: a "
+                                 f"granchain.model.contacts.ContactLaw) or None, got {law!r}")
             if law.n != self.n:
                 raise ValueError(f"the contact law's exponent n = {law.n:g} differs from the family's n = {self.n:g}: give the same n")
             if isinstance(law, PowerLaw):
@@ -115,7 +116,7 @@ class ChainFamily:
     def _model_label(self) -> str:
         parts = []
         if self.contact is not None:
-            parts.append(f"viscoelastic gamma = {self.contact.gamma:.4g}{'' if self.contact.clamp else ' (unclamped)'}")
+            parts.append(self.contact.label(4))
         if self.static_force > 0:
             parts.append(f"precompressed F0 = {self.static_force:.4g}")
         if self.striker_mass is not None:

@@ -20,7 +20,7 @@ import os
 import warnings
 
 from ..model.chain import HERTZ
-from ..model.contacts import Viscoelastic
+from ..model.contacts import law_from_record
 from ..model.distributions import distribution_from_record
 from .base import ChainFamily
 from .custom import CustomFamily
@@ -64,10 +64,9 @@ def _model_of_record(record: dict) -> dict:
     out = {}
     law = record.get("contact")
     if law is not None:
-        if law.get("law") != "viscoelastic":
-            raise ValueError(f"unknown contact law in the stored record: {law!r}")
-        # records written before the clamp option hold no "clamp": they were all clamped (the default)
-        out["contact"] = Viscoelastic(law["gamma"], law["n"], clamp=law.get("clamp", True))
+        # (records of the viscoelastic law written before its clamp option hold no "clamp": they were all
+        # clamped, its default)
+        out["contact"] = law_from_record(law)
     if record.get("static_force"):
         out["static_force"] = float(record["static_force"])
     if record.get("striker_mass") is not None:

@@ -1,7 +1,7 @@
 """The model: what a chain *is*, as values, before anything integrates it.
 
-- :mod:`~granchain.model.contacts`: the contact law (:class:`PowerLaw`, paper Eq. hertz-1, and the
-  dissipative :class:`Viscoelastic`), the static load (:class:`Precompression`), the far boundary
+- :mod:`~granchain.model.contacts`: the contact law (:class:`ContactLaw`: :class:`PowerLaw`, paper Eq. hertz-1,
+  and the dissipative :class:`Viscoelastic`), the static load (:class:`Precompression`), the far boundary
   (:class:`FreeEnd`, :class:`LoadedEnd`, :class:`FixedWall`) and the initial state (:class:`Impulse`,
   :class:`Striker`), small frozen values that declare the assumptions they license (forces depend on
   positions only, the granules ahead of the pulse are exactly at rest, the pulse leaves for good);
@@ -17,9 +17,10 @@ Everything here is NumPy and SciPy (no compiled code): solving (:mod:`granchain.
 compiled code (:mod:`granchain.backends`) read these values, never the other way round.
 """
 
-from .contacts import FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker, Viscoelastic
+from . import contacts as _contacts
+from .contacts import *  # noqa: F401,F403 (the model's values: a new contact law is exported by its own module)
 
-__all__ = ["PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker"]
+__all__ = list(_contacts.__all__)
 
 
 def __getattr__(name):

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import count, exponent, finite_scalar, positive_array
-from .contacts import (MIN_DYNAMIC_RATIO, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker,
+from .contacts import (MIN_DYNAMIC_RATIO, ContactLaw, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker,
                        Viscoelastic)
 
 __all__ = [
@@ -86,8 +86,9 @@ class Chain:
         Radii the chain was built from (None for an effective chain); ``inf`` for a wall.
     kind : str
         A short description ("radii", "decorated", "effective", ...).
-    contact : PowerLaw or Viscoelastic, optional
-        The contact law (default ``PowerLaw(n)``, the paper's; its ``n`` must be ``n``).
+    contact : ContactLaw, optional
+        The contact law (default ``PowerLaw(n)``, the paper's; its ``n`` must be ``n``): any
+        :class:`granchain.model.contacts.ContactLaw`.
         :meth:`with_dissipation` sets a viscoelastic one.
     static_force : float
         The precompression F0 >= 0 (rescaled force units; 0: none, the paper's chain;
@@ -99,7 +100,7 @@ class Chain:
 
     Attributes
     ----------
-    contact : granchain.model.contacts.PowerLaw or granchain.model.contacts.Viscoelastic
+    contact : granchain.model.contacts.ContactLaw
         The contact law.
     precompression : granchain.model.contacts.Precompression
         The static load (force 0 without one).
@@ -119,7 +120,7 @@ class Chain:
     radii: np.ndarray | None = None
     kind: str = "custom"
     meta: dict = field(default_factory=dict, repr=False)
-    contact: PowerLaw | Viscoelastic | None = field(default=None, repr=False)
+    contact: ContactLaw | None = field(default=None, repr=False)
     static_force: float = 0.0
     striker: bool = False
     precompression: Precompression = field(init=False, repr=False)
@@ -150,8 +151,9 @@ class Chain:
         if striker and m.size - wall < 3:
             raise ValueError("a chain with a striker needs the striker and at least 2 granules")
         contact = PowerLaw(n) if self.contact is None else self.contact
-        if not isinstance(contact, (PowerLaw, Viscoelastic)):
-            raise ValueError(f"contact must be a granchain.PowerLaw or granchain.Viscoelastic law, got {contact!r}")
+        if not isinstance(contact, ContactLaw):
+            raise ValueError(f"contact must be a contact law (granchain.PowerLaw, granchain.Viscoelastic, ...: a "
+                             f"granchain.model.contacts.ContactLaw), got {contact!r}")
         if contact.n != n:
             raise ValueError(f"the contact law's exponent n = {contact.n:g} differs from the chain's n = {n:g}: give the same n")
         load = self.static_force if isinstance(self.static_force, Precompression) else Precompression(self.static_force)
@@ -221,7 +223,7 @@ class Chain:
     def elastic(self) -> bool:
         """The paper's chain: power-law contacts without damping or static load (a striker and
         materials change masses and stiffnesses only)."""
-        return self.contact.gamma == 0.0 and self.static_force == 0.0
+        return self.contact.conservative and self.static_force == 0.0
 
     @property
     def ends_at_exit(self) -> bool:
@@ -394,8 +396,8 @@ class Chain:
 
     def __repr__(self) -> str:
         extras = ""
-        if self.contact.gamma > 0:
-            extras += f", viscoelastic gamma={self.contact.gamma:.6g}{'' if self.contact.clamp else ' (unclamped)'}"
+        if self.contact.label():
+            extras += f", {self.contact.label(6, '=')}"
         if self.static_force > 0:
             extras += f", static_force={self.static_force:.6g}"
         if self.striker:

@@ -30,8 +30,8 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-__all__ = ["PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker",
-           "MAX_STATIC_FORCE", "MIN_DYNAMIC_RATIO"]
+__all__ = ["ContactLaw", "PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker",
+           "MAX_STATIC_FORCE", "MIN_DYNAMIC_RATIO", "law_from_record"]
 
 #: The largest static force :class:`Precompression` takes (rescaled units, whatever the chain): a reference
 #: contact (prefactor 1, mass 1) struck at speed 1 under it has a dynamic compression 3e-13 of its static
@@ -44,31 +44,104 @@ MAX_STATIC_FORCE = 1e12
 MIN_DYNAMIC_RATIO = 1e-7
 
 
+class ContactLaw:
+    """What every contact law answers, so that the chain, the families, the stores, the CLI and the
+    backends ask the law instead of re-deriving its physics:
+
+    - ``record_name`` (its ``describe()["law"]``; :func:`law_from_record` rebuilds it from that record)
+      and ``form``, the name of its force in the compiled kernels (a backend declares the forms it has
+      code for, ``Backend.law_forms``);
+    - :attr:`conservative` (forces of positions only) and :attr:`dissipates`;
+    - ``gamma`` and ``clamp``, the kernels' damping parameters (0 and True for an elastic law);
+    - :meth:`force` (NumPy, any shape) and :meth:`force_rate` (its time derivative at one contact,
+      where the force peaks), the law itself for the reference backend and the two-body collision;
+    - :meth:`label`, a short text for reports.
+
+    A new law is a subclass here with these, and its force in the kernels
+    (``granchain.backends.kernels.forces.LAW_FORMS``)."""
+
+    record_name: ClassVar[str] = ""
+    form: ClassVar[str] = ""
+    _registry: ClassVar[dict] = {}
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("record_name"):
+            ContactLaw._registry[cls.record_name] = cls
+
+    @property
+    def conservative(self) -> bool:
+        """Forces of positions only (x'' = f(x)): what licenses Nystrom methods, Verlet and a conserved energy."""
+        return self.gamma == 0.0
+
+    @property
+    def dissipates(self) -> bool:
+        """The contacts take energy from the motion (integrated as ``dissipated_energy``)."""
+        return not self.conservative
+
+    def elastic_force(self, compression, stiffness):
+        """c delta^(n-1) for delta > 0, else 0 (NumPy, any shape): the law's conservative part."""
+        import numpy as np
+
+        d = np.asarray(compression, dtype=float)
+        return np.where(d > 0.0, stiffness * np.abs(d) ** (self.n - 1.0), 0.0)
+
+    def force(self, compression, stiffness, rate=0.0):
+        raise NotImplementedError
+
+    def force_rate(self, d: float, w: float, dw: float, c: float) -> float:
+        """d/dt of the force of one contact at compression ``d``, rate ``w`` = d(delta)/dt and relative
+        acceleration ``dw``; 0 where the force is <= 0 (open, clamped or pulling: no peak there)."""
+        raise NotImplementedError
+
+    def label(self, digits: int = 6, eq: str = " = ") -> str:
+        """A short description for reports, numbers to ``digits`` significant digits ("" for an elastic law)."""
+        return ""
+
+    def describe(self) -> dict:
+        raise NotImplementedError
+
+
+def law_from_record(record: dict) -> ContactLaw:
+    """The contact law a ``describe()`` record names (as stored in a family's record)."""
+    try:
+        cls = ContactLaw._registry[record.get("law")]
+    except (KeyError, AttributeError, TypeError):
+        raise ValueError(f"unknown contact law in the stored record: {record!r}; "
+                         f"known: {sorted(ContactLaw._registry)}") from None
+    return cls(**{k: v for k, v in record.items() if k != "law"})
+
+
 @dataclass(frozen=True)
-class PowerLaw:
+class PowerLaw(ContactLaw):
     """Contact force c delta^(n-1) for compression delta > 0, else 0 (Eq. motion_rescaled)."""
 
     n: float = 2.5
+
+    record_name: ClassVar[str] = "power-law"
+    form: ClassVar[str] = "power-law"
 
     #: Forces depend on positions only (x'' = f(x)).
     conservative: ClassVar[bool] = True
 
     #: No damping: the kernels' ``Params.gamma``.
     gamma: ClassVar[float] = 0.0
+    clamp: ClassVar[bool] = True
 
     def force(self, compression, stiffness, rate=None):
         """c delta^(n-1) for delta > 0, else 0 (NumPy, any shape; ``rate`` is not read)."""
-        import numpy as np
+        return self.elastic_force(compression, stiffness)
 
-        d = np.asarray(compression, dtype=float)
-        return np.where(d > 0.0, stiffness * np.abs(d) ** (self.n - 1.0), 0.0)
+    def force_rate(self, d, w, dw, c):
+        """c (n-1) delta^(n-2) w where the contact is closed."""
+        return c * (self.n - 1.0) * d ** (self.n - 2.0) * w if d > 0.0 else 0.0
 
     def describe(self) -> dict:
         return {"law": "power-law", "n": self.n}
 
 
 @dataclass(frozen=True)
-class Viscoelastic:
+class Viscoelastic(ContactLaw):
     """The viscoelastic Hertz contact: for compression delta > 0 closing at the rate d(delta)/dt,
 
         F = c [delta^(n-1) + gamma delta^(n-2) d(delta)/dt],   clamped at F >= 0 (``clamp=True``),
@@ -104,10 +177,8 @@ class Viscoelastic:
     n: float = 2.5
     clamp: bool = True
 
-    @property
-    def conservative(self) -> bool:
-        """Forces of positions only: only without damping (gamma = 0, the power law itself)."""
-        return self.gamma == 0.0
+    record_name: ClassVar[str] = "viscoelastic"
+    form: ClassVar[str] = "kuwabara-kono"
 
     def __post_init__(self):
         import math
@@ -156,6 +227,16 @@ class Viscoelastic:
         dp = np.where(d > 0.0, d, 0.0)
         f = stiffness * dp ** (self.n - 2.0) * (dp + self.gamma * np.asarray(rate, dtype=float))
         return np.where(d > 0.0, np.maximum(f, 0.0) if self.clamp else f, 0.0)
+
+    def force_rate(self, d, w, dw, c):
+        """d/dt of c d^(n-2) (d + gamma w): c [(n-1) d^(n-2) w + gamma ((n-2) d^(n-3) w^2 + d^(n-2) dw)]."""
+        n, gamma = self.n, self.gamma
+        if d <= 0.0 or d + gamma * w <= 0.0:
+            return 0.0
+        return c * ((n - 1.0) * d ** (n - 2.0) * w + gamma * ((n - 2.0) * d ** (n - 3.0) * w * w + d ** (n - 2.0) * dw))
+
+    def label(self, digits: int = 6, eq: str = " = ") -> str:
+        return f"viscoelastic gamma{eq}{self.gamma:.{digits}g}{'' if self.clamp else ' (unclamped)'}" if self.gamma > 0 else ""
 
     def describe(self) -> dict:
         """The law as a record; ``"clamp": False`` only for the unclamped law, so that records written

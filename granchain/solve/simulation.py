@@ -159,7 +159,7 @@ class PulseResult:
             f"# {self.chain.kind} chain, M = {self.chain.size}, n = {self.chain.n:g}, integrator {self.integrator}: "
             f"{self.status.name} ({self.message}); t_end = {self.t_end:.4g}, steps = {self.n_steps} "
             f"(+{self.n_rejected} rejected), energy error {self.energy_error:.2e}, "
-            + (f"dissipated {self.dissipated_energy:.6g}, " if self.chain.contact.gamma > 0 else "")
+            + (f"dissipated {self.dissipated_energy:.6g}, " if self.chain.contact.dissipates else "")
             + (f"static force {self.chain.static_force:.6g}, " if self.chain.static_force > 0 else "")
             + (f"momentum error {self.momentum_error:.2e}" if not self.chain.wall else
                f"wall: peak force {self.peak_wall_force:.9g} at t = {self.peak_wall_force_time:.6f}, impulse {self.wall_impulse:.9g}")

@@ -21,7 +21,6 @@ import time
 
 import numpy as np
 
-from ...model.contacts import PowerLaw
 from .. import Backend, BackendUnavailable, effective_integrator
 
 __all__ = ["CudaBackend", "available"]
@@ -58,7 +57,7 @@ class CudaBackend(Backend):
     the device time of the integration and the reduction, synchronised, transfers excluded."""
 
     name = "cuda"
-    contact_laws = (PowerLaw,)
+    law_forms = ("power-law",)
     #: The integrators it has kernels for (``Integrator.name``). The ensembles give every elastic chain kind
     #: RKN4 on it (the decorated chains' CPU default; the others' is DP5).
     methods = ("rkn4",)
@@ -94,7 +93,7 @@ class CudaBackend(Backend):
         """RKN4 alone, adaptive, on an elastic (power-law), unloaded chain at rest ahead of the pulse; then
         :meth:`Backend.check`. Each refusal names the CPU backend, which runs all of these."""
         cpu = "; use the CPU backend (backend='cpu')"
-        if type(chain.contact) not in self.contact_laws:
+        if type(chain.contact).__dict__.get("form") not in self.law_forms:
             raise ValueError(f"the cuda backend has no kernel for the contact law {chain.contact!r} (elastic power-law "
                              f"contacts only){cpu}")
         if integrator.name not in self.methods:

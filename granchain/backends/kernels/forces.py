@@ -34,6 +34,14 @@ POW_HERTZ = 1  # n = 5/2: delta * sqrt(delta)
 POW_LINEAR = 2  # n = 2: delta
 
 
+# The damping term of a dissipative law (``records.Params.damping``; read only where gamma > 0).
+DAMPING_KUWABARA_KONO = 0  # gamma c delta^(n-2) d(delta)/dt
+
+#: The force forms of the contact laws these kernels compute (``granchain.model.contacts.ContactLaw.form``)
+#: and the damping code each lowers to: what the compiled backend declares it runs.
+LAW_FORMS = {"power-law": DAMPING_KUWABARA_KONO, "kuwabara-kono": DAMPING_KUWABARA_KONO}
+
+
 def power_code(n: float) -> int:
     """The fast-path code of the contact power delta^(n-1) for exponent ``n``."""
     if n == 2.5:

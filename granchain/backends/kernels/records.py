@@ -24,8 +24,9 @@ from collections import namedtuple
 #: (``granchain.backends.numba_backend.model_params``), and the kernels that need it read it by name:
 #: no signature between them changes (``tests/test_backends.py`` checks this).
 #: ``clamp``: whether the viscoelastic force is clamped at 0 (never pulls; the default) or may pull, as in
-#: the published law (``Viscoelastic(clamp=False)``; read only where ``gamma`` > 0).
-Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force", "clamp"], defaults=(True,))
+#: the published law (``Viscoelastic(clamp=False)``; read only where ``gamma`` > 0). ``damping``: the
+#: form of the damping term (``forces.LAW_FORMS``, from the law's ``form``; read only where ``gamma`` > 0).
+Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force", "clamp", "damping"], defaults=(True, 0))
 
 #: One chain as the kernels see it (Eq. motion_rescaled). ``masses`` (M,), the last ``inf`` for a
 #: fixed wall; ``stiffness`` (M-1,), the prefactors c_k; ``params`` its :data:`Params`.
