@@ -1,4 +1,5 @@
-"""Real contacts on the command line: a static load, dissipation, a striker and the wall's material.
+"""Real contacts on the command line: a static load, dissipation (Kuwabara-Kono or viscous), a striker
+and the wall's material.
 
 ``granchain pulse`` and ``granchain ensemble`` take them (:func:`add_contact_arguments`);
 :func:`contacts_from_args` reads them back as the keywords of a chain family (``contact``,
@@ -30,6 +31,11 @@ def add_contact_arguments(parser, *, sensor: bool = False) -> None:
         "viscoelastic (Kuwabara-Kono) contacts F = c [d^(n-1) + GAMMA d^(n-2) dd/dt], clamped at 0 (a contact never "
         "pulls; the published restitution tables are for the unclamped law, whose e is lower: granchain.Viscoelastic"
         "(clamp=False) in Python): GAMMA, the damping time (rescaled; or a time such as 2us)"))
+    damp.add_argument("--viscous-damping", metavar="GAMMA", help=(
+        "viscous contacts (Rosas, Romero, Nesterenko & Lindenberg 2007): F = c d^(n-1) + GAMMA dd/dt while two grains "
+        "touch, a damping force proportional to their relative velocity, which may pull as they separate (their form; "
+        "granchain.Viscous(gamma, clamp=True) in Python never pulls): GAMMA, the damping coefficient (rescaled, in "
+        "units of M_1/T; or a quantity such as 0.5kg/s)"))
     damp.add_argument("--restitution", metavar="E@V", help=(
         "viscoelastic contacts (clamped, as --dissipation) calibrated to a coefficient of restitution E in [0.05, 1] of "
         "two reference granules colliding at speed V (rescaled; or a speed such as 1m/s), e.g. 0.9@1 or 0.9@1m/s"))
@@ -118,7 +124,7 @@ def contacts_from_args(args, units, n: float) -> dict:
     """The real contacts the options ask for: {"contact": law or None, "static_force": F0,
     "striker_mass": M or None, "wall_material": name or None} in rescaled units (errors say what to
     change, quoting what was typed)."""
-    from ..model.contacts import Precompression, Viscoelastic
+    from ..model.contacts import Precompression, Viscoelastic, Viscous
 
     text = getattr(args, "precompression", None)
     force = _quantity(text, "force", "--precompression", units, lambda s: s.force,
@@ -136,6 +142,19 @@ def contacts_from_args(args, units, n: float) -> dict:
         if gamma < 0:
             raise ValueError(f"--dissipation must be finite and >= 0 (a damping time; 0: elastic), got {text!r}")
         law = _checked("--dissipation", text, lambda: Viscoelastic(gamma, n))
+    text = getattr(args, "viscous_damping", None)
+    if text is not None:
+        syntax = "a damping coefficient >= 0 (rescaled, e.g. 0.1, or with a unit such as 0.5kg/s)"
+        gamma = _number(text)
+        if gamma is None and _NUMBER_THEN_UNIT.match(text) and units is not None:
+            from ..units import si_value
+
+            # force per relative speed: the rescaled unit is M_1 / T (Eq. motion_rescaled)
+            gamma = si_value(text, "damping", "--viscous-damping", unit="kg/s") / (units.mass / units.time)
+        gamma = _quantity(text, "time", "--viscous-damping", units, lambda s: s.time, syntax) if gamma is None else gamma
+        if not (math.isfinite(gamma) and gamma >= 0):
+            raise ValueError(f"--viscous-damping must be finite and >= 0 (a damping coefficient; 0: elastic), got {text!r}")
+        law = _checked("--viscous-damping", text, lambda: Viscous(gamma, n))
     rest = _restitution(getattr(args, "restitution", None), units)
     if rest is not None:
         law = _checked("--restitution", args.restitution, lambda: Viscoelastic.from_restitution(rest[0], rest[1], n=n))

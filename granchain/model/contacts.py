@@ -9,6 +9,8 @@ sentinels:
 - :class:`Viscoelastic` (Kuwabara & Kono 1987; Brilliantov et al. 1996): the Hertz force plus a
   damping term in the rate of compression; not conservative (only DP5 and DOP853 integrate it), and
   the energy it takes is integrated with the motion.
+- :class:`Viscous` (Rosas, Romero, Nesterenko & Lindenberg 2007, 2008): the Hertz force plus a damping
+  force proportional to the rate of compression, whatever the compression; not conservative either.
 - :class:`Precompression`: a static force F0 compresses the chain before it is struck; the chain
   starts in exact static equilibrium and the pulse rides on it.
 - :class:`FreeEnd`, :class:`LoadedEnd` and :class:`FixedWall`: whether the pulse leaves through the
@@ -30,7 +32,7 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-__all__ = ["ContactLaw", "PowerLaw", "Viscoelastic", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker",
+__all__ = ["ContactLaw", "PowerLaw", "Viscoelastic", "Viscous", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker",
            "MAX_STATIC_FORCE", "MIN_DYNAMIC_RATIO", "law_from_record"]
 
 #: The largest static force :class:`Precompression` takes (rescaled units, whatever the chain): a reference
@@ -242,6 +244,76 @@ class Viscoelastic(ContactLaw):
         """The law as a record; ``"clamp": False`` only for the unclamped law, so that records written
         before the option existed (all clamped) read as clamped and compare equal."""
         return {"law": "viscoelastic", "n": self.n, "gamma": self.gamma, **({} if self.clamp else {"clamp": False})}
+
+
+@dataclass(frozen=True)
+class Viscous(ContactLaw):
+    """The viscous contact of Rosas, Romero, Nesterenko and Lindenberg: for compression delta > 0
+    closing at the rate d(delta)/dt,
+
+        F = c delta^(n-1) + gamma d(delta)/dt,
+
+    and 0 for delta <= 0 (rescaled units; ``gamma`` is a force per relative speed, the same for every
+    contact). A. Rosas, A. H. Romero, V. F. Nesterenko and K. Lindenberg, Phys. Rev. Lett. 98, 164301
+    (2007) and Phys. Rev. E 78, 051303 (2008): a damping force proportional to the relative velocity of
+    two grains while they touch. In their form (the default, ``clamp=False``) the damping may pull at
+    the end of a collision, while the grains separate; ``clamp=True`` holds the force at >= 0, so a
+    contact never pulls (the spheres then separate freely once the damping would win).
+
+    Unlike the Kuwabara-Kono law (:class:`Viscoelastic`, whose damping grows as delta^(n-2) and vanishes
+    as a contact opens), the damping here does not depend on how far the contact is compressed. The
+    authors' result for a monodisperse chain: at low viscosity a struck granule sends a leading solitary
+    pulse that decays as it goes, followed by a shock-like secondary pulse; above a critical viscosity
+    only one non-oscillatory pulse travels.
+
+    Not ``conservative`` for gamma > 0: DP5 and DOP853 integrate it, and the energy it takes is
+    integrated with the motion (``PulseResult.dissipated_energy``, as for :class:`Viscoelastic`).
+    """
+
+    gamma: float
+    n: float = 2.5
+    clamp: bool = False
+
+    record_name: ClassVar[str] = "viscous"
+    form: ClassVar[str] = "viscous"
+
+    def __post_init__(self):
+        import numpy as np
+
+        g = _real(self.gamma, "gamma (the viscous damping coefficient)")
+        if not math.isfinite(g) or g < 0.0:
+            raise ValueError(f"gamma (the viscous damping coefficient) must be finite and >= 0, got {self.gamma!r}; "
+                             "gamma = 0 is the elastic contact")
+        n = _real(self.n, "n (the exponent of the viscous contact)")
+        if not (math.isfinite(n) and n > 1.0):
+            raise ValueError(f"the viscous contact needs a finite exponent n > 1, got n = {self.n!r}")
+        if not isinstance(self.clamp, (bool, np.bool_)):
+            raise ValueError(f"clamp must be False (the force may pull while the grains separate, the authors' form, "
+                             f"the default) or True (never pulls), got {self.clamp!r}")
+        object.__setattr__(self, "gamma", g)
+        object.__setattr__(self, "n", n)
+        object.__setattr__(self, "clamp", bool(self.clamp))
+
+    def force(self, compression, stiffness, rate=0.0):
+        """c d^(n-1) + gamma rate for d > 0 (clamped at 0 if ``clamp``), 0 for d <= 0 (NumPy, any shape)."""
+        import numpy as np
+
+        d = np.asarray(compression, dtype=float)
+        f = self.elastic_force(d, stiffness) + self.gamma * np.asarray(rate, dtype=float)
+        return np.where(d > 0.0, np.maximum(f, 0.0) if self.clamp else f, 0.0)
+
+    def force_rate(self, d, w, dw, c):
+        """d/dt of c d^(n-1) + gamma w: c (n-1) d^(n-2) w + gamma dw, where the force is > 0."""
+        if d <= 0.0 or c * d ** (self.n - 1.0) + self.gamma * w <= 0.0:
+            return 0.0
+        return c * (self.n - 1.0) * d ** (self.n - 2.0) * w + self.gamma * dw
+
+    def label(self, digits: int = 6, eq: str = " = ") -> str:
+        return f"viscous gamma{eq}{self.gamma:.{digits}g}{' (clamped)' if self.clamp else ''}" if self.gamma > 0 else ""
+
+    def describe(self) -> dict:
+        """The law as a record (``"clamp": True`` only for the clamped variant)."""
+        return {"law": "viscous", "n": self.n, "gamma": self.gamma, **({"clamp": True} if self.clamp else {})}
 
 
 @dataclass(frozen=True)

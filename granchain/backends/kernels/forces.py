@@ -36,10 +36,11 @@ POW_LINEAR = 2  # n = 2: delta
 
 # The damping term of a dissipative law (``records.Params.damping``; read only where gamma > 0).
 DAMPING_KUWABARA_KONO = 0  # gamma c delta^(n-2) d(delta)/dt
+DAMPING_VISCOUS = 1  # gamma d(delta)/dt (Rosas et al., Phys. Rev. Lett. 98, 164301 (2007))
 
 #: The force forms of the contact laws these kernels compute (``granchain.model.contacts.ContactLaw.form``)
 #: and the damping code each lowers to: what the compiled backend declares it runs.
-LAW_FORMS = {"power-law": DAMPING_KUWABARA_KONO, "kuwabara-kono": DAMPING_KUWABARA_KONO}
+LAW_FORMS = {"power-law": DAMPING_KUWABARA_KONO, "kuwabara-kono": DAMPING_KUWABARA_KONO, "viscous": DAMPING_VISCOUS}
 
 
 def power_code(n: float) -> int:
@@ -75,12 +76,17 @@ def law_force(d, w, c, p):
     the contact is closed but the damping would pull, the spheres separate freely), else as published
     (it pulls at the end of a collision: the law the restitution tables of Schwager & Poschel, Phys. Rev.
     E 57, 650 (1998) and Ramirez et al., Phys. Rev. E 60, 4465 (1999) are for), and 0 for d <= 0
-    (``granchain.model.contacts.Viscoelastic``)."""
+    (``granchain.model.contacts.Viscoelastic``); or the viscous force c d^(n-1) + gamma w of Rosas et al.
+    (``p.damping`` = ``DAMPING_VISCOUS``, ``granchain.model.contacts.Viscous``), clamped the same way."""
     if p.gamma == 0.0:
         return contact_force(d, c, p)
     if d <= 0.0:
         return 0.0
-    if p.power == POW_HERTZ:
+    if p.damping == DAMPING_VISCOUS:  # c d^(n-1) + gamma w (granchain.model.contacts.Viscous)
+        if c == 0.0:  # the padding after the last granule (rkloop.padded_arrays): no contact, no damping
+            return 0.0
+        f = contact_force(d, c, p) + p.gamma * w
+    elif p.power == POW_HERTZ:
         f = c * math.sqrt(d) * (d + p.gamma * w)
     elif p.power == POW_LINEAR:
         f = c * (d + p.gamma * w)
@@ -100,6 +106,10 @@ def force_rate(d, w, dw, c, p):
     if d <= 0.0 or law_force(d, w, c, p) <= 0.0:
         return 0.0
     n, g = p.n, p.gamma
+    if p.damping == DAMPING_VISCOUS:  # d/dt (c d^(n-1) + gamma w)
+        if p.power == POW_HERTZ:
+            return c * 1.5 * math.sqrt(d) * w + g * dw
+        return c * (n - 1.0) * d ** (n - 2.0) * w + g * dw
     if p.power == POW_HERTZ:
         r = math.sqrt(d)
         return c * (1.5 * r * w + g * (0.5 * w * w / r + r * dw))
