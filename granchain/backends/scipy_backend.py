@@ -21,7 +21,7 @@ from scipy.integrate import DOP853 as _SciPyDOP853
 from scipy.optimize import brentq
 
 from .._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
-from ..model.contacts import PowerLaw
+from ..model.contacts import PowerLaw, Precompression
 from . import Backend
 from .kernels.peaks import write_info
 from .kernels.records import INFO_SIZE
@@ -40,8 +40,8 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
     law = PowerLaw(n) if law is None else law
     damped = law.dissipates
     with np.errstate(divide="ignore"):
-        d0 = (static_force / stiffness) ** (1.0 / (n - 1.0)) if static_force > 0 else np.zeros(M - 1)
-    f0 = np.where(d0 > 0.0, stiffness * d0 ** (n - 1.0), 0.0)
+        d0 = Precompression(static_force).overlaps(stiffness, n)  # the static state, declared by the load
+    f0 = law.elastic_force(d0, stiffness)
 
     def forces(x, v=None):
         d = d0 + (x[:-1] - x[1:])
@@ -112,7 +112,7 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     def forces(z):  # total contact forces of a state z = (x, v, ...)
         return law_forces(z[:M], z[M:2 * M])
 
-    d0 = (static_force / stiffness) ** (1.0 / (n - 1.0)) if static_force > 0 else np.zeros(M - 1)
+    d0 = Precompression(static_force).overlaps(stiffness, n)
     peak_v = v0[obs].astype(float)
     peak_t = np.zeros(obs.size)
     grid_v = np.zeros((t_grid.size, obs.size))  # time-major, as the kernels

@@ -11,6 +11,7 @@ from .._status import Status, final_status
 from .._validate import finite_scalar
 from ..backends import integrator_as_run
 from ..model.chain import Chain
+from ..model.contacts import Precompression
 from ..units import rescaled_attrs
 from .integrators import RunControls, get_integrator
 
@@ -241,8 +242,7 @@ def linear_crossing_time(masses, stiffness, n: float, static_force: float):
     batches (rows of ``masses``, ``stiffness``); a wall (infinite mass) is not crossed."""
     m = np.asarray(masses, dtype=float)
     c = np.asarray(stiffness, dtype=float)
-    d0 = (static_force / c) ** (1.0 / (n - 1.0))
-    k0 = (n - 1.0) * c * d0 ** (n - 2.0)
+    k0 = Precompression(static_force).linear_stiffness(c, n)
     heavier = np.maximum(m[..., :-1], m[..., 1:])
     return np.sum(np.where(np.isfinite(heavier), np.sqrt(heavier / k0), 0.0), axis=-1)
 
