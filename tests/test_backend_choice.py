@@ -163,7 +163,8 @@ def _cuda_usable() -> bool:
 @pytest.mark.parametrize("command", [["ensemble", "--large", "4", "--realizations", "2", "--out", "{tmp}/s.zarr"],
                                      ["reproduce", "--quick", "--out", "{tmp}/r"],
                                      ["design", "--out", "{tmp}/d"],
-                                     ["validity", "--quick", "--out", "{tmp}/v"]])
+                                     ["validity", "--quick", "--out", "{tmp}/v"],
+                                     ["pulse", "--radii", "1,1,1", "--plot", "{tmp}/p.png"]])
 def test_cli_backend_cuda_without_a_gpu_is_one_line_and_exit_2(command, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
     if _cuda_usable():
@@ -252,3 +253,21 @@ def test_a_design_on_a_backend_without_its_default_method_uses_rkn4():
     assert BatchEvaluator(space, "transmitted-energy").integrator.name == "dp5"  # negative control
     on = BatchEvaluator(space, "transmitted-energy", backend=RknOnly())
     assert on.integrator.name == "rkn4" and on.describe()["backend"] == "rkn-only"
+
+
+def test_pulse_backend_cpu_is_the_default_and_cuda_picks_rkn4(capsys):
+    """``granchain pulse --backend cpu`` prints what the default prints; with ``--backend cuda`` and no
+    ``--integrator`` the integrator is RKN4 (the one method the GPU runs), not DP5, which it would refuse."""
+    import argparse
+
+    from granchain.cli import main
+    from granchain.cli.pulse import _integrator
+
+    assert main(["pulse", "--radii", "1,0.5,1"]) == 0
+    default = capsys.readouterr().out
+    assert main(["pulse", "--radii", "1,0.5,1", "--backend", "cpu"]) == 0
+    assert capsys.readouterr().out == default
+    args = argparse.Namespace(integrator=None, rtol=None, atol=None, dt=None, backend="cuda")
+    assert _integrator(args).name == "rkn4"
+    assert _integrator(argparse.Namespace(**{**vars(args), "backend": "cpu"})).name == "dp5"
+    assert _integrator(argparse.Namespace(**{**vars(args), "integrator": "dp5"})).name == "dp5"

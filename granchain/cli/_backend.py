@@ -1,5 +1,6 @@
 """``--backend`` and ``--switch-backend``: what computes the ensembles of ``ensemble``, ``reproduce``,
-``design`` and ``validity`` (``run_ensemble(backend=..., switch_backend=...)``)."""
+``design`` and ``validity`` (``run_ensemble(backend=..., switch_backend=...)``), and the one chain of
+``pulse`` (``simulate(backend=...)``; no store, so no ``--switch-backend``)."""
 
 from __future__ import annotations
 

@@ -8,6 +8,7 @@ import sys
 import numpy as np
 
 from ..solve.integrators import INTEGRATORS
+from ._backend import add_backend_arguments, backend_of, check_usable
 from ._contacts import add_contact_arguments, apply_to_chain, contacts_from_args
 from ._units import add_unit_arguments, scale_from_args
 from .plot import add_pulse_plot_arguments, pulse_plot_request, write_pulse_plot
@@ -67,8 +68,9 @@ def add_parser(subparsers) -> None:
         '(--json: "peak_force", "peak_force_time"); printed anyway, in N and s too, with physical units'))
     p.add_argument("--n", type=float, default=2.5, help="exponent of the contact potential (default: Hertz, 2.5)")
     # the lists of integrators and of the ones each setting applies to come from the registry
-    p.add_argument("--integrator", default="dp5", metavar="{" + ",".join(sorted(INTEGRATORS)) + "}",
-                   help=f"one of {', '.join(f'{name} ({INTEGRATOR_NOTES[name]})' if name in INTEGRATOR_NOTES else name for name in sorted(INTEGRATORS))}")
+    p.add_argument("--integrator", default=None, metavar="{" + ",".join(sorted(INTEGRATORS)) + "}",
+                   help=f"one of {', '.join(f'{name} ({INTEGRATOR_NOTES[name]})' if name in INTEGRATOR_NOTES else name for name in sorted(INTEGRATORS))} "
+                        "(default dp5; rkn4 with --backend cuda, the one method the GPU runs)")
     p.add_argument("--rtol", type=float, help=f"relative tolerance ({', '.join(taking('rtol'))})")
     p.add_argument("--atol", type=float, help=f"absolute tolerance ({', '.join(taking('atol'))})")
     p.add_argument("--dt", type=float, help=f"time step ({', '.join(taking('dt'))})")
@@ -81,15 +83,17 @@ def add_parser(subparsers) -> None:
     add_contact_arguments(p, sensor=True)
     add_unit_arguments(p)
     add_pulse_plot_arguments(p)
+    add_backend_arguments(p, switch=False)
     p.set_defaults(func=run)
 
 
 def _integrator(args):
     from .. import INTEGRATORS
 
-    cls = INTEGRATORS.get(args.integrator.lower())
+    name = args.integrator or ("rkn4" if backend_of(args) == "cuda" else "dp5")
+    cls = INTEGRATORS.get(name.lower())
     if cls is None:
-        raise ValueError(f"unknown integrator {args.integrator!r}; choose one of {sorted(INTEGRATORS)}")
+        raise ValueError(f"unknown integrator {name!r}; choose one of {sorted(INTEGRATORS)}")
     kwargs = {k: getattr(args, k) for k in ("rtol", "atol", "dt") if getattr(args, k) is not None}
     try:
         return cls(**kwargs)
@@ -148,6 +152,7 @@ def run(args) -> int:
 
     if args.momentum_conserving and not args.effective:
         raise ValueError("--momentum-conserving applies only to the effective chain: add --effective (with --small-radii)")
+    check_usable(args)  # a GPU asked where none can run: its one-line reason, before any work
     units = scale_from_args(args)  # None without unit options; checked before integrating
     contacts = contacts_from_args(args, units, args.n)
     if args.small_radii is not None:
@@ -173,7 +178,7 @@ def run(args) -> int:
         grid = np.arange(0.0, t_end, 0.01)
     plot = pulse_plot_request(args, chain, grid, sensors)  # --plot: checked before the run; the grid (and gauges) it needs
     result = gc.simulate(chain, _integrator(args), t_grid=grid if plot is None else plot.grid,
-                         sensors=sensors if plot is None else plot.sensors)
+                         sensors=sensors if plot is None else plot.sensors, backend=backend_of(args))
     # Decorated (and effective) chains are reported by large-granule index k = 1..N
     # (decorated chain index 2k - 1); a chain from --radii by its own index.
     labels = np.arange(1, result.granule.size + 1) if args.small_radii is not None else result.granule
