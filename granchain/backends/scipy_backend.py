@@ -33,7 +33,8 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
     Eq. (motion_rescaled), vectorised with NumPy; returns (rhs, forces) with forces(x, v) the contacts'
     total forces (static load included).
 
-    ``law`` is the chain's contact law (any ``granchain.model.contacts.ContactLaw``: its NumPy ``force``); ``static_force`` F0 > 0 precompresses the chain: x are displacements from the
+    ``law`` is the chain's contact law (any ``granchain.model.contacts.ContactLaw``: its NumPy ``force``);
+    ``static_force`` F0 > 0 precompresses the chain: x are displacements from the
     static state, each contact has the overlap delta0 = (F0 / c)^(1/(n-1)) and the accelerations come
     from the forces less their static values (the external load balances them at the ends)."""
     M = masses.size
