@@ -256,3 +256,47 @@ def test_methods_for_conservative_forces_refuse_it():
     for integrator in (gc.RKN4(), gc.Verlet(dt=1e-3)):
         with pytest.raises(ValueError, match="positions only"):
             gc.simulate(chain, integrator)
+
+
+# -- (e) designing a protector that dissipates --------------------------------------------------------
+def test_design_with_a_viscous_law_reports_what_simulate_gives(tmp_path):
+    """``optimize(..., contact=Viscous(0.1))``: every chain of the run, the design and the reference, has
+    the law; the reported values are exactly what ``simulate`` (DP5, the default for a law that reads
+    velocities) gives for them; damping lowers the wall force of the same design below the elastic one;
+    the run is recorded with its law and is not continued with another one."""
+    from granchain.design import TaperedSpace, optimize
+
+    law = Viscous(0.1)
+    space = TaperedSpace(8, q=(0.0, 0.1))
+    res = optimize(space, "wall-force", budget=12, popsize=3, local=None, polish=False, seed=1, contact=law,
+                   out=tmp_path / "run")
+    assert res.chain.contact == law and res.reference_chain.contact == law
+    assert res.integrator.name == "dp5"
+    assert res.value == gc.simulate(res.chain, gc.DP5()).peak_wall_force
+    assert res.reference_value == gc.simulate(res.reference_chain, gc.DP5()).peak_wall_force
+    elastic = gc.simulate(space.chain(res.x), gc.DP5()).peak_wall_force
+    assert res.value < 0.9 * elastic
+    assert res.to_dict()["contact"] == law.describe()
+    with pytest.raises(ValueError, match="other arguments"):
+        optimize(space, "wall-force", budget=12, popsize=3, local=None, polish=False, seed=1, contact=Viscous(0.2),
+                 out=tmp_path / "run")
+
+
+def test_design_refuses_a_method_for_conservative_forces_and_another_exponent():
+    from granchain.design import BatchEvaluator, TaperedSpace
+
+    space = TaperedSpace(6)
+    with pytest.raises(ValueError, match="positions only"):
+        BatchEvaluator(space, "wall-force", integrator=gc.RKN4(), contact=Viscous(0.1))
+    with pytest.raises(ValueError, match="differs from the design space's n"):
+        BatchEvaluator(space, "wall-force", contact=Viscous(0.1, n=3.0))
+
+
+def test_design_command_line_takes_the_damping_laws(tmp_path, capsys):
+    from granchain.cli import main
+
+    assert main(["design", "--size", "6", "--budget", "12", "--popsize", "3", "--local", "none", "--no-polish",
+                 "--no-figure", "--quiet", "--viscous-damping", "0.1", "--out", str(tmp_path / "d")]) == 0
+    assert "- contacts: viscous gamma = 0.1" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["design", "--out", str(tmp_path / "e"), "--viscous-damping", "0.1", "--dissipation", "0.1"])

@@ -1,7 +1,8 @@
 """Real contacts on the command line: a static load, dissipation (Kuwabara-Kono or viscous), a striker
 and the wall's material.
 
-``granchain pulse`` and ``granchain ensemble`` take them (:func:`add_contact_arguments`);
+``granchain pulse`` and ``granchain ensemble`` take them (:func:`add_contact_arguments`), ``granchain
+design`` the dissipative laws (:func:`add_damping_arguments`);
 :func:`contacts_from_args` reads them back as the keywords of a chain family (``contact``,
 ``static_force``, ``striker_mass``) in the paper's rescaled units. A bare number is rescaled; a
 quantity with a unit (``2N``, ``5g``, ``3mm``, ``1m/s``, ``2us``) is physical and needs the
@@ -11,7 +12,7 @@ which fix the force, mass, length, velocity and time units.
 
 from __future__ import annotations
 
-__all__ = ["add_contact_arguments", "contacts_from_args", "apply_to_chain"]
+__all__ = ["add_contact_arguments", "add_damping_arguments", "contacts_from_args", "apply_to_chain"]
 
 
 def add_contact_arguments(parser, *, sensor: bool = False) -> None:
@@ -26,7 +27,24 @@ def add_contact_arguments(parser, *, sensor: bool = False) -> None:
         "static compressive force F0 (rescaled; or a force such as 2N): the chain starts in static equilibrium, "
         "loaded at the struck end and held at the far end by the wall (with --wall) or by the same force"))
     load.add_argument("--static-force", dest="precompression", metavar="FORCE", help="the same as --precompression")
-    damp = g.add_mutually_exclusive_group()
+    add_damping_arguments(g)
+    strike = g.add_mutually_exclusive_group()
+    strike.add_argument("--striker-mass", metavar="M", help=(
+        "strike the chain with a free sphere of this mass (rescaled: the reference granule's mass is 1; or a mass "
+        "such as 5g) at the impact speed, instead of an initial velocity on granule 1"))
+    strike.add_argument("--striker-radius", metavar="R", help="the same, a sphere of this radius (rescaled; or e.g. 3mm)")
+    g.add_argument("--wall-material", metavar="NAME", help=(
+        "with --wall: the wall's material (a preset name, or 'rigid'); default: the last granule's own material"))
+    if sensor:
+        g.add_argument("--sensor", metavar="K1,K2,...", help=(
+            "record the force inside these granules (1-based labels; the mean of each one's two contact forces, "
+            "as an embedded gauge measures it) and print its peak and time"))
+
+
+def add_damping_arguments(group) -> None:
+    """Register the dissipative contact laws (``--dissipation``, ``--viscous-damping``, ``--restitution``,
+    one at most) on ``group`` (an argument group or parser): the real contacts ``granchain design`` takes."""
+    damp = group.add_mutually_exclusive_group()
     damp.add_argument("--dissipation", metavar="GAMMA", help=(
         "viscoelastic (Kuwabara-Kono) contacts F = c [d^(n-1) + GAMMA d^(n-2) dd/dt], clamped at 0 (a contact never "
         "pulls; the published restitution tables are for the unclamped law, whose e is lower: granchain.Viscoelastic"
@@ -39,17 +57,6 @@ def add_contact_arguments(parser, *, sensor: bool = False) -> None:
     damp.add_argument("--restitution", metavar="E@V", help=(
         "viscoelastic contacts (clamped, as --dissipation) calibrated to a coefficient of restitution E in [0.05, 1] of "
         "two reference granules colliding at speed V (rescaled; or a speed such as 1m/s), e.g. 0.9@1 or 0.9@1m/s"))
-    strike = g.add_mutually_exclusive_group()
-    strike.add_argument("--striker-mass", metavar="M", help=(
-        "strike the chain with a free sphere of this mass (rescaled: the reference granule's mass is 1; or a mass "
-        "such as 5g) at the impact speed, instead of an initial velocity on granule 1"))
-    strike.add_argument("--striker-radius", metavar="R", help="the same, a sphere of this radius (rescaled; or e.g. 3mm)")
-    g.add_argument("--wall-material", metavar="NAME", help=(
-        "with --wall: the wall's material (a preset name, or 'rigid'); default: the last granule's own material"))
-    if sensor:
-        g.add_argument("--sensor", metavar="K1,K2,...", help=(
-            "record the force inside these granules (1-based labels; the mean of each one's two contact forces, "
-            "as an embedded gauge measures it) and print its peak and time"))
 
 
 import math

@@ -83,6 +83,11 @@ def add_parser(subparsers) -> None:
     from ._backend import add_backend_arguments
 
     add_backend_arguments(p)
+    from ._contacts import add_damping_arguments
+
+    add_damping_arguments(p.add_argument_group(
+        "dissipative contacts", "every chain of the run, designs and reference alike, with a damping contact law (a protector "
+                                "that takes energy out of the pulse; integrated with DP5). Default: the paper's elastic contacts"))
     add_unit_arguments(p)
     p.set_defaults(func=run)
 
@@ -132,13 +137,16 @@ def run(args) -> int:
     check_usable(args)
     out = output_directory(args.out, "--out")  # checked before any work: a run's result must have somewhere to go
     units = scale_from_args(args, n=2.5)  # checked before any integration
+    from ._contacts import contacts_from_args
+
+    contact = contacts_from_args(args, units, 2.5)["contact"]
     space = build_space(args)
     local = None if args.local == "none" else args.local
     budget = args.budget if args.budget is not None else max(DEFAULT_BUDGET, minimum_budget(space, args.popsize, local))
     try:
         result = optimize(space, args.objective, budget=budget, seed=args.seed, popsize=args.popsize, local=local,
                           statistic=_statistic(args.statistic), out=out, progress=not args.quiet, polish=args.polish,
-                          backend=backend_of(args), switch_backend=args.switch_backend)
+                          backend=backend_of(args), switch_backend=args.switch_backend, contact=contact)
     except KeyboardInterrupt:
         print(f"granchain design: interrupted; the evaluations so far are saved in {args.out}. Run the same command again to "
               "continue.", file=sys.stderr)

@@ -42,10 +42,17 @@ class Evaluation:
     failed: np.ndarray
 
 
-def run_rows(batch, integrator, contacts, backend=None) -> dict:
+def model_of(contact) -> dict | None:
+    """The ``model`` of ``Integrator.integrate_batch`` for a design run whose chains have the contact law
+    ``contact`` (None: the paper's elastic contacts)."""
+    return None if contact is None else {"contact": contact, "static_force": 0.0, "striker": False}
+
+
+def run_rows(batch, integrator, contacts, backend=None, contact=None) -> dict:
     """Integrate every row of ``batch`` with the compiled batch kernel; the per-row outputs by name.
     ``backend``: None, the integrator's own backend; a backend's name ("cuda") or a
-    ``granchain.backends.Backend``: that backend's ``integrate_batch``, with the same arguments."""
+    ``granchain.backends.Backend``: that backend's ``integrate_batch``, with the same arguments.
+    ``contact``: the chains' contact law (None: the paper's)."""
     # Writable C-contiguous copies: a chain's frozen (read-only) arrays would make Numba compile the
     # kernel once more for read-only arguments (a minute), for no gain.
     masses = np.array(batch.masses, dtype=float, order="C")
@@ -64,12 +71,13 @@ def run_rows(batch, integrator, contacts, backend=None) -> dict:
     t_max = time_limit(masses.shape[1], float(v0.min()), batch.n)
     if backend is None:
         integrator.integrate_batch(masses, stiffness, batch.n, v0, observed, contacts, t_grid=t_grid, t_max=t_max,
-                                   controls=RunControls(), scale=1.0, out=out)
+                                   controls=RunControls(), scale=1.0, out=out, model=model_of(contact))
     else:
         from ..ensembles import backend as _backend
 
         _backend.resolve(backend).integrate_batch(integrator, masses, stiffness, batch.n, v0, observed, contacts,
-                                                  t_grid=t_grid, t_max=t_max, controls=RunControls(), scale=1.0, out=out)
+                                                  t_grid=t_grid, t_max=t_max, controls=RunControls(), scale=1.0, out=out,
+                                                  model=model_of(contact))
     return out
 
 
@@ -85,19 +93,19 @@ def _history_value(chain, objective: Objective, integrator) -> float:
     return objective.from_result(res) if res.ok else float("nan")
 
 
-def evaluate_chains(batch, objective: Objective, integrator, backend=None) -> tuple:
+def evaluate_chains(batch, objective: Objective, integrator, backend=None, contact=None) -> tuple:
     """(values (R,), ok (R,)) of every row of ``batch`` for ``objective``: through the batch kernel (on
     ``backend``, :func:`run_rows`), or row by row with simulate for a history objective (on the CPU: one
-    chain's wall force on a fine grid is no work for a GPU)."""
+    chain's wall force on a fine grid is no work for a GPU). ``contact``: the chains' contact law."""
     wall = bool(np.isinf(batch.masses[0, -1]))
     objective.check(wall)
     if objective.route(wall) == "rows":
-        rows = run_rows(batch, integrator, objective.contacts(batch.masses.shape[1] - int(wall)), backend)
+        rows = run_rows(batch, integrator, objective.contacts(batch.masses.shape[1] - int(wall)), backend, contact)
         ok = rows["status"] == 0
         values = np.where(ok, objective.from_rows(rows, batch), np.nan)
         return values, ok
     values = np.array([_history_value(batch_chain(batch.masses[r], batch.stiffness[r], batch.n, batch.initial_velocity[r],
-                                                  batch.observed), objective, integrator)
+                                                  batch.observed, model_of(contact)), objective, integrator)
                        for r in range(batch.masses.shape[0])])
     return values, np.isfinite(values)
 
@@ -116,13 +124,16 @@ def _statistic(values: np.ndarray, statistic) -> tuple:
     return float(np.quantile(v, q)), float(boot.std(ddof=1))
 
 
-def default_integrator(space):
+def default_integrator(space, contact=None):
     """Decorated chains: the ensembles' method and tolerances (``RKN4.relaxed`` at
     :data:`granchain.ENSEMBLE_RTOL`; light granules set its step, :func:`granchain.ensemble_integrator`),
     every granule integrated to the end (a design's objective may read any granule or contact, and its
-    chains are short); every other chain: ``DP5()``, :func:`granchain.simulate`'s default, so that a
-    reported value is exactly what ``simulate(space.chain(best))`` gives."""
-    return ensemble_integrator("decorated", windowed=False) if space.chain_kind == "decorated" else DP5()
+    chains are short); every other chain, and every chain whose contact law dissipates (RKN4 integrates
+    forces of positions only): ``DP5()``, :func:`granchain.simulate`'s default, so that a reported value
+    is exactly what ``simulate(space.chain(best))`` gives."""
+    if space.chain_kind == "decorated" and (contact is None or contact.conservative):
+        return ensemble_integrator("decorated", windowed=False)
+    return DP5()
 
 
 def _check_statistic(statistic):
@@ -147,11 +158,15 @@ class BatchEvaluator:
     ``workers(func, parts)`` (or a Dask client), ``parts`` the generation split into ``parts`` batches
     (default: as many as this machine has cores); ``backend``: None or "cpu" (default), the integrator's own
     backend; "cuda" (or a ``granchain.backends.Backend``): a generation's rows on that backend, recorded
-    in :meth:`describe` (two backends agree within the accuracy contract, not bitwise)."""
+    in :meth:`describe` (two backends agree within the accuracy contract, not bitwise); ``contact``: the
+    chains' contact law (a ``granchain.model.contacts.ContactLaw`` of the space's exponent, e.g.
+    ``granchain.Viscous(0.1)``: a protector that dissipates; None: the paper's elastic contacts), recorded
+    in :meth:`describe`."""
 
     def __init__(self, space, objective, *, integrator=None, statistic="mean", client=None, workers=None,
-                 parts: int | None = None, backend=None):
+                 parts: int | None = None, backend=None, contact=None):
         from ..ensembles import backend as _backend
+        from ..model.contacts import ContactLaw, PowerLaw
 
         self.backend = _backend.checked(backend)
         _backend.resolve(self.backend)  # a GPU where none is usable: refused before the first generation
@@ -166,12 +181,25 @@ class BatchEvaluator:
         self.workers = workers
         self.parts = parts
         self.space = space
+        if contact is not None:
+            if not isinstance(contact, ContactLaw):
+                raise ValueError(f"contact must be a contact law (granchain.Viscous, granchain.Viscoelastic, ...) or None, "
+                                 f"got {contact!r}")
+            if contact.n != space.n:
+                raise ValueError(f"the contact law's exponent n = {contact.n:g} differs from the design space's n = "
+                                 f"{space.n:g}: give the same n")
+            if isinstance(contact, PowerLaw):
+                contact = None  # the default, recorded as such
+        self.contact = contact
         self.objective = get_objective(objective)
         self.objective.check(space.wall)
         self.objective.bind(space.granules)  # e.g. a sensor's contact must exist in these chains
-        self.integrator = default_integrator(space) if integrator is None else get_integrator(integrator)
+        self.integrator = default_integrator(space, contact) if integrator is None else get_integrator(integrator)
+        if contact is not None and self.integrator.needs_conservative_forces and not contact.conservative:
+            raise ValueError(f"{self.integrator.name} integrates x'' = f(x) and needs forces that depend on positions only; "
+                             f"the contact law {contact!r} depends on velocities: use DP5 (the default for it) or DOP853")
         methods = getattr(_backend.resolve(self.backend), "methods", None)
-        if integrator is None and methods is not None and self.integrator.name not in methods:
+        if integrator is None and methods is not None and self.integrator.name not in methods and contact is None:
             # a backend without a kernel for the default (the GPU runs RKN4 alone): the decorated chains' method,
             # every granule to the end, valid for every elastic chain (recorded in describe())
             self.integrator = ensemble_integrator("decorated", windowed=False)
@@ -182,8 +210,14 @@ class BatchEvaluator:
         from ..ensembles import backend as _backend
 
         # the backend only when it is not the CPU default: the records of earlier runs stay as they were
+        # the backend and the contact law only when they are not the defaults: earlier records stay as they were
         return {"integrator": self.integrator.describe(), "statistic": self.statistic,
-                **({} if self.backend is None else {"backend": _backend.name_of(self.backend)})}
+                **({} if self.backend is None else {"backend": _backend.name_of(self.backend)}),
+                **({} if self.contact is None else {"contact": self.contact.describe()})}
+
+    def chain(self, chain):
+        """``chain`` (a design or the reference) with this run's contact law."""
+        return chain if self.contact is None else chain.replace(contact=self.contact)
 
     def __call__(self, X) -> Evaluation:
         X = self.space.as_array(X)
@@ -196,22 +230,22 @@ class BatchEvaluator:
             k = min(self.parts or os.cpu_count() or 2, X.shape[0])
             parts = [p for p in np.array_split(X, k) if p.size]
             results = list(self.workers(partial(_evaluate, self.space, self.objective, self.integrator, self.statistic,
-                                                backend=self.backend), parts))
+                                                backend=self.backend, contact=self.contact), parts))
             if results and not isinstance(results[0], Evaluation) and hasattr(results[0], "result"):
                 results = [r.result() for r in results]  # futures (a Dask client's map)
             return Evaluation(*(np.concatenate([getattr(r, f) for r in results]) for f in ("value", "stderr", "failed")))
         if self.client is None or X.shape[0] < 2:
-            return _evaluate(self.space, self.objective, self.integrator, self.statistic, X, self.backend)
+            return _evaluate(self.space, self.objective, self.integrator, self.statistic, X, self.backend, self.contact)
         workers = max(1, len(self.client.scheduler_info().get("workers", {})))
         parts = [p for p in np.array_split(X, min(workers, X.shape[0])) if p.size]
         futures = self.client.map(_evaluate, [self.space] * len(parts), [self.objective] * len(parts),
                                   [self.integrator] * len(parts), [self.statistic] * len(parts), parts,
-                                  [self.backend] * len(parts), pure=False)
+                                  [self.backend] * len(parts), [self.contact] * len(parts), pure=False)
         results = self.client.gather(futures)
         return Evaluation(*(np.concatenate([getattr(r, f) for r in results]) for f in ("value", "stderr", "failed")))
 
 
-def _evaluate(space, objective, integrator, statistic, X, backend=None) -> Evaluation:
+def _evaluate(space, objective, integrator, statistic, X, backend=None, contact=None) -> Evaluation:
     """The values of designs X (a top-level function, so that Dask can ship it)."""
     P = X.shape[0]
     feasible = space.violation(X) <= 0.0
@@ -219,7 +253,7 @@ def _evaluate(space, objective, integrator, statistic, X, backend=None) -> Evalu
     if not feasible.any():
         return Evaluation(value, stderr, failed)
     Xf = X[feasible]
-    values, ok = evaluate_chains(space.batch(Xf), objective, integrator, backend)
+    values, ok = evaluate_chains(space.batch(Xf), objective, integrator, backend, contact)
     R = space.realizations
     values, ok = values.reshape(Xf.shape[0], R), ok.reshape(Xf.shape[0], R)
     idx = np.flatnonzero(feasible)

@@ -34,6 +34,8 @@ def length_and_mass_chain(result):
     radius = (mass / k) ** (1.0 / 3.0)
     radii = np.concatenate(([1.0], np.full(k, radius)))
     chain = from_radii(radii, n=result.chain.n, kind="monodisperse", wall=result.chain.wall)
+    if result.chain.contact.dissipates:  # the run's contact law, as the design and the reference have it
+        chain = chain.replace(contact=result.chain.contact)
     return chain, k, radius, k * radius / length - 1.0
 
 

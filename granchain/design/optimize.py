@@ -125,7 +125,7 @@ class _Progress:
 def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int = 10, local: str | None = "powell",
              statistic="mean", integrator=None, out=None, resume: bool = True, client=None, workers=None, progress: bool = False,
              mutation=(0.5, 1.0), recombination: float = 0.7, polish: bool = True, backend=None,
-             switch_backend: bool = False) -> DesignResult:
+             switch_backend: bool = False, contact=None) -> DesignResult:
     """Search ``space`` for the design that does best for ``objective`` within ``budget`` evaluations; the
     result says how sure it is (:attr:`DesignResult.convergence`: a search that stops at its budget has
     found the best design it evaluated, not a proven optimum).
@@ -184,6 +184,11 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
         Continue a run in ``out`` that another backend computed (its values then come from two backends,
         within the accuracy contract, not bitwise); the record keeps ``"backend"`` (the first) and adds
         ``"backends_used"`` in the order first used. False: such a run is refused, naming both.
+    contact : granchain.model.contacts.ContactLaw, optional
+        The contact law of every chain of the run, designs and reference alike (None: the paper's elastic
+        contacts). A dissipative law (``granchain.Viscous``, ``granchain.Viscoelastic``) designs a
+        protector that takes energy out of the pulse; it is integrated with DP5 (the default for it) and
+        recorded with the run, which is continued only with the same law.
     """
 
     from .preflight import check_feasible, check_size, output_directory
@@ -195,7 +200,7 @@ def optimize(space, objective, *, budget: int = 200, seed: int = 0, popsize: int
     if not isinstance(switch_backend, (bool, np.bool_)):
         raise ValueError(f"switch_backend must be True or False, got {switch_backend!r}")
     evaluator = BatchEvaluator(space, objective, integrator=integrator, statistic=statistic, client=client, workers=workers,
-                               backend=backend)
+                               backend=backend, contact=contact)
     objective = evaluator.objective
     popsize = count("popsize", popsize, minimum=2)
     seed = count("seed", seed, minimum=0)

@@ -75,13 +75,13 @@ class DesignResult:
             raise ValueError("no design of the run was feasible and integrated: widen the bounds or relax the constraints")
         i = int(np.argmin(f))
         x = history.x[i].copy()
-        ref = space.reference_chain()
+        ref = evaluator.chain(space.reference_chain())
         from ..families import ChainBatch
         from .evaluate import evaluate_chains
 
         ref_batch = ChainBatch(ref.masses[None], ref.stiffness[None], np.array([ref.initial_velocity]), ref.observed, ref.n)
-        ref_value = float(evaluate_chains(ref_batch, objective, evaluator.integrator)[0][0])
-        return cls(space, objective, x, space.params(x), space.chain(x), float(history.value[i]), float(history.stderr[i]), ref,
+        ref_value = float(evaluate_chains(ref_batch, objective, evaluator.integrator, contact=evaluator.contact)[0][0])
+        return cls(space, objective, x, space.params(x), evaluator.chain(space.chain(x)), float(history.value[i]), float(history.stderr[i]), ref,
                    ref_value, history.count, history.dataset(), evaluator.integrator, evaluator.statistic, seed, budget,
                    message, version, dict(convergence or {}))
 
@@ -102,6 +102,7 @@ class DesignResult:
             "best_radii": [float(r) for r in self.best_radii],
             "best_value": _num(self.value),
             "best_stderr": _num(self.stderr) if self.space.random else None,
+            **({"contact": self.chain.contact.describe()} if self.chain.contact.dissipates else {}),
             "reference": {"chain": f"monodisperse, {self.reference_chain.size - int(self.reference_chain.wall)} granules of radius 1"
                                    + (", fixed wall of the granules' material" if self.reference_chain.wall else ", free end"),
                           "value": _num(self.reference_value)},
@@ -142,6 +143,8 @@ class DesignResult:
             f"- objective: {obj.long_name} ({'minimised' if obj.sense > 0 else 'maximised'})"
             + (f", {self.statistic} over {self.space.realizations} realisations (common to every design)" if self.space.random else ""),
             f"- design found: {params}",
+            *([f"- contacts: {self.chain.contact.label()} (the design and the reference alike)"]
+              if self.chain.contact.dissipates else []),
             f"- its value: {value:.6g}{unit}{err}",
             f"- monodisperse chain of the same size: {ref:.6g}{unit} (ratio {ratio:.4g})",
             f"- evaluations: {self.n_evaluations} (budget {self.budget}"
