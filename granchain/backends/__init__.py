@@ -26,7 +26,7 @@ import dataclasses
 import numpy as np
 
 
-__all__ = ["Backend", "BackendUnavailable", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run", "final_energy_momentum"]
+__all__ = ["Backend", "BackendUnavailable", "RunRecord", "BACKENDS", "get_backend", "effective_integrator", "integrator_as_run", "final_energy_momentum"]
 
 #: The slots of the ``info`` record every backend fills (defined with the kernels, in
 #: :mod:`granchain.backends.kernels.records`): offered here so that callers read a run's record through
@@ -83,6 +83,40 @@ def integrator_as_run(integrator, chain) -> dict:
     return record
 
 
+@dataclasses.dataclass(frozen=True)
+class RunRecord:
+    """What one run of one chain gives its caller (:meth:`Backend.run`), each field named as the
+    results name it (``granchain.PulseResult``, the ensembles' schema), so that no caller reads a
+    backend's tuple or its ``info`` slots.
+
+    Per observed granule (K): ``peak_velocity``, ``peak_time``; on the time grid (T): ``velocity``
+    (T, K, time-major), ``wall_force`` (T; zeros without a wall), ``contact_force`` (T, S: the contacts
+    asked for, 0-based); per contact (M - 1, the wall's last): ``peak_force``, ``peak_force_time``; the
+    run: ``status`` (a ``granchain.Status`` code), ``t_end``, ``exit_time`` (-1: the pulse did not
+    leave), ``n_steps``, ``n_rejected``, ``n_evaluations``, ``dissipated_energy``; the final state
+    ``positions``, ``velocities`` (M) and its ``energy`` (kinetic + potential + dissipated, the energy
+    of granules a trailing window left behind included) and ``momentum``."""
+
+    status: int
+    peak_velocity: np.ndarray
+    peak_time: np.ndarray
+    velocity: np.ndarray
+    peak_force: np.ndarray
+    peak_force_time: np.ndarray
+    wall_force: np.ndarray
+    contact_force: np.ndarray
+    t_end: float
+    exit_time: float
+    n_steps: int
+    n_rejected: int
+    n_evaluations: int
+    dissipated_energy: float
+    positions: np.ndarray
+    velocities: np.ndarray
+    energy: float
+    momentum: float
+
+
 class BackendUnavailable(RuntimeError):
     """A backend that cannot run on this machine (no GPU, or its compiler not installed); the message says
     what to install or which backend to use instead."""
@@ -117,9 +151,31 @@ class Backend:
     def release(self, handle) -> None:
         """Stop what :meth:`prepare` started, if it still runs."""
 
+    def run(self, integrator, chain, *, t_grid, t_max, stop_at_exit, controls, sensed=None) -> RunRecord:
+        """Run ``integrator`` on ``chain`` from its initial state (granule 1, or the striker, moving at
+        ``chain.initial_velocity``, every granule at rest in the static state) to the stop rule; the
+        :class:`RunRecord` of the run. ``t_grid`` (T,) the times of the recorded velocities and forces,
+        ``t_max`` the time limit, ``stop_at_exit`` whether the pulse's exit ends the run, ``controls`` a
+        ``granchain.RunControls``, ``sensed`` the contacts (0-based) whose forces are recorded on the grid.
+        A backend implements :meth:`integrate`, the low-level contract this wraps (the batch loop of
+        :meth:`integrate_batch` calls it too)."""
+        from .kernels.records import INFO_DISSIPATED, INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END
+
+        x = np.zeros(chain.size)
+        v = np.zeros(chain.size)
+        v[0] = chain.initial_velocity
+        status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = self.integrate(
+            integrator, chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=stop_at_exit, controls=controls,
+            sensed=sensed)
+        energy, momentum = final_energy_momentum(chain, x, v, info)
+        return RunRecord(int(status), peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c, float(info[INFO_T_END]),
+                         float(info[INFO_EXIT]), int(info[INFO_STEPS]), int(info[INFO_REJECTED]), int(info[INFO_EVALUATIONS]),
+                         float(info[INFO_DISSIPATED]), x, v, float(energy), float(momentum))
+
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state); returns
-        (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c) (see ``Integrator.integrate``)."""
+        (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c) (see ``Integrator.integrate``):
+        the low-level contract :meth:`run` wraps."""
         raise NotImplementedError
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,

@@ -310,66 +310,55 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
             raise ValueError(f"t_grid ends at {grid[-1]:g}, beyond t_max = {t_max:g}")
         t_max = max(t_max, float(grid[-1]))
     sensor_labels, sensed = _sensor_contacts(chain, sensors, grid)
-    x = np.zeros(chain.size)
-    v = np.zeros(chain.size)
-    v[0] = chain.initial_velocity
-    runner = integ.integrate
-    if backend is not None and backend != "cpu":
-        from ..backends import Backend, get_backend
+    from ..backends import Backend, get_backend
 
-        chosen = backend if isinstance(backend, Backend) else get_backend(backend)
-        runner = lambda *a, **k: chosen.integrate(integ, *a, **k)  # noqa: E731
-    status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = runner(
-        chain, x, v, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit" and chain.ends_at_exit), controls=controls,
-        sensed=sensed)
-    # (the info record's slots, through the backends' seam: the kernels that define them load on first use,
-    # not with ``import granchain``)
-    from ..backends import INFO_DISSIPATED, INFO_EVALUATIONS, INFO_EXIT, INFO_REJECTED, INFO_STEPS, INFO_T_END
-
+    # the integrator's own backend by default (the Numba kernels; SciPy for DOP853), else the one chosen
+    chosen = backend if isinstance(backend, Backend) else get_backend(
+        integ.backend if backend is None or backend == "cpu" else backend)
+    run = chosen.run(integ, chain, t_grid=grid, t_max=t_max, stop_at_exit=(stop == "exit" and chain.ends_at_exit),
+                     controls=controls, sensed=sensed)
+    status, x, v = run.status, run.positions, run.velocities
     # a granule still speeding up when a run meant to outlast the pulse stopped (its exit rule or time limit)
     # has no peak yet (e.g. behind a heavy striker); stop="t_max" asks for maxima up to a chosen time
     # instead, and exit_margin = 0 for the state at the very instant the pulse left
     if stop == "exit" and controls.exit_margin > 0:
-        status = final_status(status, peak_t, float(info[INFO_T_END]), _accelerated(chain, x, v))
+        status = final_status(status, run.peak_time, run.t_end, _accelerated(chain, x, v))
     if status != Status.SUCCESS:
         import warnings
 
         warnings.warn(f"simulate: the integration did not succeed: {Status(status).name} ({Status(status).message}); "
                       "check result.status before using the peaks", RuntimeWarning, stacklevel=2)
     e0, p0 = chain.energy, chain.momentum
-    from ..backends import final_energy_momentum
-
-    dissipated = float(info[INFO_DISSIPATED])
-    e1, p1 = final_energy_momentum(chain, x, v, info)
+    e1, p1 = run.energy, run.momentum
     wall = chain.wall
     return PulseResult(
         chain=chain,
         integrator=integ.name,
         granule=chain.labels,
-        peak_velocity=peak_v,
-        peak_time=peak_t,
+        peak_velocity=run.peak_velocity,
+        peak_time=run.peak_time,
         status=Status(status),
-        t_end=float(info[INFO_T_END]),
-        exit_time=float(info[INFO_EXIT]),
+        t_end=run.t_end,
+        exit_time=run.exit_time,
         energy_error=float((e1 - e0) / e0),
         momentum_error=float("nan") if wall else float((p1 - p0) / p0),
-        n_steps=int(info[INFO_STEPS]),
-        n_rejected=int(info[INFO_REJECTED]),
-        n_evaluations=int(info[INFO_EVALUATIONS]),
+        n_steps=run.n_steps,
+        n_rejected=run.n_rejected,
+        n_evaluations=run.n_evaluations,
         t_grid=grid if grid.size else None,
-        velocity=np.ascontiguousarray(grid_v.T) if grid.size else None,
+        velocity=np.ascontiguousarray(run.velocity.T) if grid.size else None,
         positions=x,
         velocities=v,
-        peak_force=peak_f,
-        peak_force_time=peak_ft,
-        wall_force=grid_f if wall and grid.size else None,
-        peak_wall_force=float(peak_f[-1]) if wall else None,
-        peak_wall_force_time=float(peak_ft[-1]) if wall else None,
+        peak_force=run.peak_force,
+        peak_force_time=run.peak_force_time,
+        wall_force=run.wall_force if wall and grid.size else None,
+        peak_wall_force=float(run.peak_force[-1]) if wall else None,
+        peak_wall_force_time=float(run.peak_force_time[-1]) if wall else None,
         wall_impulse=float(p0 - p1) if wall else None,
         integrator_record=integrator_as_run(integ, chain),
-        dissipated_energy=dissipated,
+        dissipated_energy=run.dissipated_energy,
         sensor_granule=sensor_labels,
-        sensor_force=None if sensor_labels is None else 0.5 * (grid_c[:, 0::2] + grid_c[:, 1::2]).T.copy(),
+        sensor_force=None if sensor_labels is None else 0.5 * (run.contact_force[:, 0::2] + run.contact_force[:, 1::2]).T.copy(),
     )
 
 
