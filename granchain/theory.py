@@ -171,7 +171,8 @@ def _simulate_batch(masses: np.ndarray, stiffness: np.ndarray, n: float, observe
     scale = 2.0**40  # fixed-point sums of |v| <= 1 over < 2^20 chains fit in int64
     out = {
         "peak_velocity": np.zeros((R, K)), "peak_time": np.zeros((R, K)), "peak_force": np.zeros((R, 0)),
-        "peak_force_time": np.zeros((R, 0)), "peak_wall": np.full((R, 2), np.nan), "status": np.zeros(R, dtype=np.int64),
+        "peak_force_time": np.zeros((R, 0)), "peak_wall_force": np.full(R, np.nan),
+        "peak_wall_force_time": np.full(R, np.nan), "status": np.zeros(R, dtype=np.int64),
         "energy_error": np.zeros(R), "n_steps": np.zeros(R, dtype=np.int64), "t_end": np.zeros(R),
         "sum_v": np.zeros((grid.size, K), dtype=np.int64), "sum_v2": np.zeros((grid.size, K), dtype=np.int64),
         "sum_wall": np.zeros(grid.size, dtype=np.int64), "n_valid": np.zeros(1, dtype=np.int64),

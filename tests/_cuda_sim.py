@@ -28,7 +28,7 @@ def batch(n_large: int, realizations: int, kind: str = "decorated", seed: int = 
 
 def outputs(R: int, K: int, C: int, T: int) -> dict:
     return {"peak_velocity": np.zeros((R, K)), "peak_time": np.zeros((R, K)), "peak_force": np.zeros((R, C)),
-            "peak_force_time": np.zeros((R, C)), "peak_wall": np.zeros((R, 2)), "status": np.zeros(R, np.int64),
+            "peak_force_time": np.zeros((R, C)), "peak_wall_force": np.zeros(R), "peak_wall_force_time": np.zeros(R), "status": np.zeros(R, np.int64),
             "n_steps": np.zeros(R, np.int64), "t_end": np.zeros(R), "energy_error": np.zeros(R),
             "sum_v": np.zeros((T, K), np.int64), "sum_v2": np.zeros((T, K), np.int64),
             "sum_wall": np.zeros(T, np.int64), "n_valid": np.zeros(1, np.int64), "lags": None}

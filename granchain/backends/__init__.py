@@ -203,7 +203,9 @@ class Backend:
                 integrator, chain, x, v, t_grid=t_grid, t_max=float(limits[r]), stop_at_exit=chain.ends_at_exit,
                 controls=controls)
             out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
-            gather_forces(peak_f, peak_ft, contacts, wall, out["peak_force"][r], out["peak_force_time"][r], out["peak_wall"][r])
+            gather_forces(peak_f, peak_ft, contacts, out["peak_force"][r], out["peak_force_time"][r])
+            if wall:
+                out["peak_wall_force"][r], out["peak_wall_force_time"][r] = peak_f[-1], peak_ft[-1]
             out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]
             e0 = impulse_energy(masses[r, 0], initial_velocity[r])
             e1 = final_energy(x, v, masses[r], stiffness[r], model_params(chain), info) + info[INFO_DISSIPATED]

@@ -166,9 +166,12 @@ class NumbaBackend(Backend):
         # per-thread sums are allocated here, not in the kernel (see thread_sums).
         params = model_params(first)
         batch = Batch(kernel_array(masses), kernel_array(stiffness), initial_velocity, params, limits)
-        rows = Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"], out["peak_wall"],
-                    out["status"], out["energy_error"], out["n_steps"], out["t_end"],
-                    out["dissipated_energy"] if "dissipated_energy" in out else np.zeros(masses.shape[0]))
+        # (buffers the schema holds only for some chains, a wall or a dissipative law: the kernel writes them
+        # for those alone, and gets scratch otherwise)
+        R = masses.shape[0]
+        rows = Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"],
+                    out.get("peak_wall_force", np.full(R, np.nan)), out.get("peak_wall_force_time", np.full(R, np.nan)),
+                    out["status"], out["energy_error"], out["n_steps"], out["t_end"], out.get("dissipated_energy", np.zeros(R)))
         entry = chain_kernel(method.kind, params)
         warm.wait_for(entry)  # a helper process compiling it into the cache (a first run of both chains)
         kernel = kernel_function(entry, *row_records(batch, method, run, rows))

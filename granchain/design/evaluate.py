@@ -64,7 +64,8 @@ def run_rows(batch, integrator, contacts, backend=None, contact=None) -> dict:
     t_grid = np.zeros(1)  # no averaged pulse: one sample, the objectives read peaks
     out = {"peak_velocity": np.full((R, K), np.nan), "peak_time": np.full((R, K), np.nan),
            "peak_force": np.full((R, C), np.nan), "peak_force_time": np.full((R, C), np.nan),
-           "peak_wall": np.full((R, 2), np.nan), "status": np.full(R, -1, dtype=np.int8),
+           "peak_wall_force": np.full(R, np.nan), "peak_wall_force_time": np.full(R, np.nan),
+           "status": np.full(R, -1, dtype=np.int8),
            "energy_error": np.full(R, np.nan), "n_steps": np.full(R, -1, dtype=np.int64), "t_end": np.full(R, np.nan),
            "sum_v": np.zeros((1, K), dtype=np.int64), "sum_v2": np.zeros((1, K), dtype=np.int64),
            "sum_wall": np.zeros(1, dtype=np.int64), "n_valid": np.zeros(1, dtype=np.int64), "lags": None}

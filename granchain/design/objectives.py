@@ -98,7 +98,7 @@ class WallForce(Objective):
     sense: int = 1
 
     def from_rows(self, rows, batch):
-        return rows["peak_wall"][:, 0].copy()
+        return rows["peak_wall_force"].copy()
 
     def from_result(self, result):
         return float(result.peak_wall_force)
@@ -250,7 +250,7 @@ class ArrivalTime(Objective):
 
     def from_rows(self, rows, batch):
         if np.isinf(batch.masses[0, -1]):
-            return rows["peak_wall"][:, 1].copy()
+            return rows["peak_wall_force_time"].copy()
         return rows["peak_time"][:, -1].copy()
 
     def from_result(self, result):

@@ -29,7 +29,7 @@ from ..solve.simulation import linear_crossing_time, time_limit
 from . import backend as _backend
 from . import pulse_window as _window
 from .pulse_window import AUTO, FULL
-from .store import WALL, MemorySink, Variable, ZarrSink, _check_out, check_same_family
+from .store import MemorySink, Variable, ZarrSink, _check_out, check_same_family
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL",
            "DAMPED_RTOL", "DAMPED_ATOL", "ensemble_integrator"]
@@ -379,13 +379,8 @@ def _merge(parts: list, spec: EnsembleSpec) -> dict:
 # result and progress sum of the schema under its name, allocated with the Variable's dtype and fill value
 # and its dims' sizes, so a variable added to the schema gets its buffer, reaches the integrator in
 # ``out`` (``Integrator.integrate_batch``) and is written to the store. Where the kernels' conventions
-# differ from the store's (arrays packed together, an array no store holds, sums grid axis first), they
-# are converted here, in one place:
-
-#: Kernel arrays that hold several schema variables side by side on a last axis, in the schema's order:
-#: the wall's peak force and its time are one (R, 2) array in the kernels. Chains without a wall get it
-#: too (the kernels leave it untouched); the store then holds nothing from it.
-PACKED = {"peak_wall": WALL}
+# differ from the store's (an array no store holds, sums grid axis first), they are converted here, in
+# one place:
 
 #: What the kernels compute that no store holds: the wall force summed on the time grid.
 UNSTORED = (Variable("sum_wall", ("chunk", "chain", "time"), "int64", 0, "1",
@@ -414,8 +409,7 @@ def chunk_buffers(spec: EnsembleSpec, realizations: int) -> dict:
     """Arrays at their not-computed values for ``realizations`` realisations of every chain, by kernel name: each
     result of :func:`~granchain.ensembles.schema.result_variables` (dims ``chain``, ``realization``, ...) and each
     progress sum (:func:`~granchain.ensembles.schema.progress_sum_variables`, in :func:`_kernel_dims`), plus the
-    kernel-only arrays :data:`PACKED` (the members share dims, dtype and fill) and :data:`UNSTORED`. The
-    kernels add into the sums, which start at their fill value, 0."""
+    kernel-only arrays :data:`UNSTORED`. The kernels add into the sums, which start at their fill value, 0."""
     from .store import progress_sum_variables, result_variables, sizes
 
     dims = {**sizes(spec), "realization": realizations, "one": 1}
@@ -423,9 +417,7 @@ def chunk_buffers(spec: EnsembleSpec, realizations: int) -> dict:
     def full(v: Variable, names, extra=()):
         return np.full(tuple(dims[d] for d in names) + extra, v.fill, dtype=v.dtype)
 
-    packed = {m.name for members in PACKED.values() for m in members}
-    out = {v.name: full(v, v.dims) for v in result_variables(spec.family) if v.name not in packed}
-    out.update({name: full(members[0], members[0].dims, (len(members),)) for name, members in PACKED.items()})
+    out = {v.name: full(v, v.dims) for v in result_variables(spec.family)}
     out.update({v.name: full(v, _kernel_dims(v)) for v in progress_sum_variables(spec) + UNSTORED})
     return out
 
@@ -465,8 +457,6 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
     out = {"chunk": j, "realizations": idx.size, **params}
     stored = {v.name for v in result_variables(family)}
     out.update({name: a for name, a in buffers.items() if name in stored})
-    for name, members in PACKED.items():  # into the schema's variables, where the family's store holds them
-        out.update({v.name: np.ascontiguousarray(buffers[name][..., i]) for i, v in enumerate(members) if v.name in stored})
     for v in progress_sum_variables(spec):
         out[v.name] = _store_layout(buffers[v.name], v)
     return out

@@ -124,8 +124,8 @@ class Integrator:
         stopping at the pulse's exit (or its return from a wall), on this integrator's backend.
 
         Writes ``out["peak_velocity"]``/``["peak_time"]`` (R, K), ``["peak_force"]``/
-        ``["peak_force_time"]`` (R, C) of the contacts ``contacts``, ``["peak_wall"]`` (R, 2: the
-        wall's peak force and its time; only for chains ending in a wall), ``["status"]``,
+        ``["peak_force_time"]`` (R, C) of the contacts ``contacts``, ``["peak_wall_force"]``,
+        ``["peak_wall_force_time"]`` (R,; only for chains ending in a wall), ``["status"]``,
         ``["energy_error"]``, ``["n_steps"]``, ``["t_end"]`` (R,) (and ``["dissipated_energy"]`` (R,)
         when ``out`` has it), adds the fixed-point
         sums of successful rows' grid velocities to ``["sum_v"]``/``["sum_v2"]`` (T, K) (and of

@@ -166,7 +166,7 @@ class CudaBackend(Backend):
         contacts = np.asarray(contacts, dtype=np.int64)
         out["peak_force"][:], out["peak_force_time"][:] = res["peak_f"][:, contacts], res["peak_ft"][:, contacts]
         if wall:
-            out["peak_wall"][:, 0], out["peak_wall"][:, 1] = res["peak_f"][:, -1], res["peak_ft"][:, -1]
+            out["peak_wall_force"][:], out["peak_wall_force_time"][:] = res["peak_f"][:, -1], res["peak_ft"][:, -1]
         out["status"][:], out["n_steps"][:], out["t_end"][:] = res["status"], res["steps"], res["t_end"]
         out["energy_error"][:] = _energy_errors(first, masses, stiffness, initial_velocity, res)
         if "dissipated_energy" in out:

@@ -64,16 +64,13 @@ def accumulate_fixed_point_1d(grid_f, scale, acc):
 
 
 @njit(**JIT)
-def gather_forces(peak_f, peak_ft, contacts, wall, force_out, force_time_out, wall_out):
-    """The recorded contacts' peak forces (``contacts``: 0-based contact indices) and, with a wall,
-    the wall contact's (the chain's last) into ``wall_out`` = [peak, time]."""
+def gather_forces(peak_f, peak_ft, contacts, force_out, force_time_out):
+    """The recorded contacts' peak forces and times (``contacts``: 0-based contact indices) into
+    ``force_out``, ``force_time_out``. A wall's contact is the chain's last: its peak is
+    ``peak_f[-1]``, ``peak_ft[-1]``."""
     for q in range(contacts.shape[0]):
         force_out[q] = peak_f[contacts[q]]
         force_time_out[q] = peak_ft[contacts[q]]
-    if wall:
-        last = peak_f.shape[0] - 1
-        wall_out[0] = peak_f[last]
-        wall_out[1] = peak_ft[last]
 
 
 def thread_sums(n_threads, T, K, L):
@@ -105,7 +102,7 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     Per realisation writes (``rows``, ``records.Rows``) peak_v[r, :], peak_t[r, :], status[r],
     energy_error[r] ((E_end + E_dissipated - E_0)/E_0), dissipated[r] (E_dissipated), n_steps[r], t_end[r], the peak forces of the contacts
     ``tally.contacts`` (0-based) into peak_f[r, :], peak_ft[r, :] and, for chains ending in a wall, the
-    wall's peak force and time into peak_wall[r, :] (untouched otherwise). Adds (``sums``,
+    wall's peak force and time into peak_wall_force[r], peak_wall_force_time[r] (untouched otherwise). Adds (``sums``,
     ``records.Sums``) round(v * scale) and round(v^2 * scale) of every successful realisation's
     observed velocities on ``t_grid`` into sum_v / sum_v2 (int64, (T, K)), with a wall
     round(F_wall * scale) into sum_wall (T,), and counts them in n_valid[0]. With a non-empty
@@ -124,7 +121,7 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     stop_at_exit, exit_margin, max_steps, peak_rtol, sensed, pulse_end = (run.stop_at_exit, run.exit_margin, run.max_steps,
                                                                           run.peak_rtol, run.contacts, run.pulse_end)
     contacts, scale, lags = tally
-    peak_v, peak_t, peak_f, peak_ft, peak_wall, status, energy_error, n_steps, t_end, dissipated = rows
+    peak_v, peak_t, peak_f, peak_ft, wall_f, wall_ft, status, energy_error, n_steps, t_end, dissipated = rows
     sum_v, sum_v2, sum_wall, n_valid, sum_a, sum_a2 = sums
     acc1, acc2, accw, cnt, al1, al2 = partials
     R, M = masses.shape
@@ -148,7 +145,10 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
         row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed, pulse_end)
         st = kernel(method, Model(m, c, params), row_run, State(x, v),
                              Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
-        gather_forces(pf, pft, contacts, wall, peak_f[r], peak_ft[r], peak_wall[r])
+        gather_forces(pf, pft, contacts, peak_f[r], peak_ft[r])
+        if wall:
+            wall_f[r] = pf[M - 2]
+            wall_ft[r] = pft[M - 2]
         status[r] = st
         n_steps[r] = np.int64(info[INFO_STEPS])
         t_end[r] = info[INFO_T_END]

@@ -68,10 +68,11 @@ State = namedtuple("State", ["x", "v"])
 Outputs = namedtuple("Outputs", ["peak_v", "peak_t", "grid_v", "peak_f", "peak_ft", "grid_f", "info", "grid_c"])
 
 #: What the ensemble kernel records per realisation r (rows): peak velocity and time (R, K), the
-#: recorded contacts' peak force and time (R, C), the wall's peak force and time (R, 2), the status,
-#: the relative energy error, the accepted steps, the end time and the dissipated energy (R,).
-Rows = namedtuple("Rows", ["peak_v", "peak_t", "peak_f", "peak_ft", "peak_wall", "status", "energy_error", "n_steps",
-                           "t_end", "dissipated"])
+#: recorded contacts' peak force and time (R, C), the wall's peak force and its time (R,; the schema's
+#: ``peak_wall_force``, ``peak_wall_force_time``), the status, the relative energy error, the accepted
+#: steps, the end time and the dissipated energy (R,).
+Rows = namedtuple("Rows", ["peak_v", "peak_t", "peak_f", "peak_ft", "peak_wall_force", "peak_wall_force_time", "status",
+                           "energy_error", "n_steps", "t_end", "dissipated"])
 
 #: The ensemble kernel's fixed-point sums (int64): of the grid velocities and their squares (T, K), of
 #: the wall force (T,), the count of successful realisations (1,), and of the aligned pulse (L, K).
