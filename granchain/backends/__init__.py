@@ -178,6 +178,28 @@ class Backend:
         the low-level contract :meth:`run` wraps."""
         raise NotImplementedError
 
+    def run_batch(self, integrator, batch, buffers: dict, *, t_grid, t_max, controls, scale: float = 1.0,
+                  model: dict | None = None, pulse_end=None) -> None:
+        """Run ``integrator`` on every row of ``batch`` (a ``granchain.families.ChainBatch``: the rows'
+        masses, stiffnesses and initial velocities, the observed granules and the contacts whose peak forces
+        are recorded) into ``buffers``, arrays named as the results' schema names them (per row
+        ``peak_velocity``, ``peak_time``, ``peak_force``, ``peak_force_time``, ``status``, ``energy_error``,
+        ``n_steps``, ``t_end``, and ``peak_wall_force``, ``peak_wall_force_time``, ``dissipated_energy``
+        where the chains have them; the fixed-point sums ``sum_v``, ``sum_v2``, ``sum_wall``, ``n_valid``,
+        and ``lags``, ``sum_a``, ``sum_a2`` for the aligned pulse: ``granchain.ensembles.run.chunk_buffers``
+        builds them from the schema). ``model``: what the rows share besides their arrays (``Chain``
+        keywords; None: the paper's chain). The batch seam of the ensembles and the design evaluator; a
+        backend implements :meth:`integrate_batch`, which this calls with the batch's arrays (C-contiguous
+        and writable: read-only arrays would make Numba compile its kernels again for them)."""
+
+        def array(a, dtype=float):
+            return np.require(a, dtype=dtype, requirements=("C", "W"))
+
+        self.integrate_batch(integrator, array(batch.masses), array(batch.stiffness), batch.n,
+                             array(batch.initial_velocity), array(batch.observed, np.int64),
+                             array(batch.recorded_contacts(), np.int64), t_grid=t_grid, t_max=t_max, controls=controls,
+                             scale=scale, out=buffers, model=model, pulse_end=pulse_end)
+
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
                         controls, scale: float, out: dict, model: dict | None = None, pulse_end=None) -> None:
         """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time.

@@ -49,18 +49,15 @@ def model_of(contact) -> dict | None:
 
 
 def run_rows(batch, integrator, contacts, backend=None, contact=None) -> dict:
-    """Integrate every row of ``batch`` with the compiled batch kernel; the per-row outputs by name.
-    ``backend``: None, the integrator's own backend; a backend's name ("cuda") or a
-    ``granchain.backends.Backend``: that backend's ``integrate_batch``, with the same arguments.
-    ``contact``: the chains' contact law (None: the paper's)."""
-    # Writable C-contiguous copies: a chain's frozen (read-only) arrays would make Numba compile the
-    # kernel once more for read-only arguments (a minute), for no gain.
-    masses = np.array(batch.masses, dtype=float, order="C")
-    stiffness = np.array(batch.stiffness, dtype=float, order="C")
-    v0 = np.array(batch.initial_velocity, dtype=float, order="C")
-    observed = np.array(batch.observed, dtype=np.int64, order="C")
-    contacts = np.array(contacts, dtype=np.int64, order="C")
-    R, K, C = masses.shape[0], observed.size, contacts.size
+    """Integrate every row of ``batch`` with the compiled batch kernel (``Backend.run_batch``); the per-row
+    outputs by name. ``contacts``: the contacts whose peak forces the objective reads. ``backend``: None,
+    the integrator's own backend; a backend's name ("cuda") or a ``granchain.backends.Backend``: that
+    backend. ``contact``: the chains' contact law (None: the paper's)."""
+    from ..backends import get_backend
+    from ..ensembles import backend as _backend
+
+    batch = batch._replace(contacts=np.asarray(contacts, dtype=np.int64))
+    R, K, C = batch.masses.shape[0], len(batch.observed), batch.contacts.size
     t_grid = np.zeros(1)  # no averaged pulse: one sample, the objectives read peaks
     out = {"peak_velocity": np.full((R, K), np.nan), "peak_time": np.full((R, K), np.nan),
            "peak_force": np.full((R, C), np.nan), "peak_force_time": np.full((R, C), np.nan),
@@ -69,16 +66,10 @@ def run_rows(batch, integrator, contacts, backend=None, contact=None) -> dict:
            "energy_error": np.full(R, np.nan), "n_steps": np.full(R, -1, dtype=np.int64), "t_end": np.full(R, np.nan),
            "sum_v": np.zeros((1, K), dtype=np.int64), "sum_v2": np.zeros((1, K), dtype=np.int64),
            "sum_wall": np.zeros(1, dtype=np.int64), "n_valid": np.zeros(1, dtype=np.int64), "lags": None}
-    t_max = time_limit(masses.shape[1], float(v0.min()), batch.n)
-    if backend is None:
-        integrator.integrate_batch(masses, stiffness, batch.n, v0, observed, contacts, t_grid=t_grid, t_max=t_max,
-                                   controls=RunControls(), scale=1.0, out=out, model=model_of(contact))
-    else:
-        from ..ensembles import backend as _backend
-
-        _backend.resolve(backend).integrate_batch(integrator, masses, stiffness, batch.n, v0, observed, contacts,
-                                                  t_grid=t_grid, t_max=t_max, controls=RunControls(), scale=1.0, out=out,
-                                                  model=model_of(contact))
+    t_max = time_limit(batch.masses.shape[1], float(np.min(batch.initial_velocity)), batch.n)
+    chosen = get_backend(integrator.backend) if backend is None else _backend.resolve(backend)
+    chosen.run_batch(integrator, batch, out, t_grid=t_grid, t_max=t_max, controls=RunControls(), scale=1.0,
+                     model=model_of(contact))
     return out
 
 

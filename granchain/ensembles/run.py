@@ -436,9 +436,7 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
     scale = float(2.0**spec.fixed_point_bits)
     for ci, name in enumerate(spec.chains):
         batch = family.build(params, name)
-        masses = np.ascontiguousarray(batch.masses, dtype=float)
-        v0 = np.ascontiguousarray(batch.initial_velocity, dtype=float)
-        stiffness = np.ascontiguousarray(batch.stiffness, dtype=float)
+        masses, stiffness, v0 = batch.masses, batch.stiffness, batch.initial_velocity
         t_max = max(time_limit(masses.shape[1], float(v0.min()), batch.n), float(spec.t_grid[-1]))
         if family.static_force > 0:
             # No exit to stop at: each row runs to its own time bounding the pulse's crossing, as
@@ -446,12 +444,9 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
             rows = [time_limit(masses.shape[1], float(v), batch.n) for v in v0]
             crossing = linear_crossing_time(masses, stiffness, batch.n, family.static_force)
             t_max = np.maximum(np.minimum(rows, 2.0 * crossing + 20.0), float(spec.t_grid[-1]))
-        integrate = _integrate_batch(spec, name)
-        integrate(
-            masses, stiffness, batch.n, v0,
-            np.ascontiguousarray(batch.observed, dtype=np.int64), np.ascontiguousarray(batch.recorded_contacts()),
-            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale,
-            out={**{k: a[ci] for k, a in buffers.items()}, "lags": spec.lags}, model=family.model(),
+        _run_batch(
+            spec, name, batch, {**{k: a[ci] for k, a in buffers.items()}, "lags": spec.lags},
+            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, model=family.model(),
             pulse_end=_window.keep_until(spec.pulse_ends[name]) if spec.pulse_ends and name in spec.pulse_ends else None,
         )
     out = {"chunk": j, "realizations": idx.size, **params}
@@ -462,14 +457,16 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
     return out
 
 
-def _integrate_batch(spec: EnsembleSpec, kind: str):
-    """``integrate_batch(masses, ...)`` of the chain kind ``kind``: its integrator's own (the CPU default), or
-    the chosen backend's with the integrator first (the same arguments either way)."""
+def _run_batch(spec: EnsembleSpec, kind: str, batch, buffers: dict, **kwargs) -> None:
+    """``Backend.run_batch`` of the chain kind ``kind``'s integrator on the chosen backend, or (the CPU
+    default) on the integrator's own (the kinds' may differ: DOP853 runs on SciPy)."""
     integrator = spec.chain_integrators[kind]
     backend = _backend.resolve(spec.backend)
     if backend is None:
-        return integrator.integrate_batch
-    return lambda *args, **kwargs: backend.integrate_batch(integrator, *args, **kwargs)
+        from ..backends import get_backend
+
+        backend = get_backend(integrator.backend)
+    backend.run_batch(integrator, batch, buffers, **kwargs)
 
 
 def _dask_chunk(spec: EnsembleSpec, j: int) -> dict:
