@@ -90,7 +90,7 @@ def add_parser(subparsers) -> None:
 def _integrator(args):
     from .. import INTEGRATORS
 
-    name = args.integrator or ("rkn4" if backend_of(args) == "cuda" else "dp5")
+    name = args.integrator if args.integrator is not None else ("rkn4" if backend_of(args) == "cuda" else "dp5")
     cls = INTEGRATORS.get(name.lower())
     if cls is None:
         raise ValueError(f"unknown integrator {name!r}; choose one of {sorted(INTEGRATORS)}")
