@@ -298,19 +298,22 @@ def test_a_chunk_holds_the_schema_variables_and_nothing_else(family, lags):
 
 @pytest.fixture
 def marker(monkeypatch):
-    """A per-realisation result added to the schema (dtype and fill of its own), which the integrator
-    fills with the number of granules of the chain it integrates."""
+    """A per-realisation result added to the schema (dtype and fill of its own), which the backend's batch
+    seam (``Backend.run_batch``, through which every chunk runs) fills with the number of granules of the
+    chains it integrates."""
+    from granchain.backends import Backend
+
     added = store.Variable("marker", ("chain", "realization"), "int16", -7, "1", "granules of the chain (test)")
     monkeypatch.setattr(schema, "RESULTS", schema.RESULTS + (added,))
     seen = []
-    integrate = gc.Integrator.integrate_batch
+    run_batch = Backend.run_batch
 
-    def integrate_and_mark(self, masses, *args, out, **kw):
-        seen.append((out["marker"].dtype, out["marker"].copy()))
-        integrate(self, masses, *args, out=out, **kw)
-        out["marker"][:] = masses.shape[1]
+    def run_and_mark(self, integrator, batch, buffers, **kw):
+        seen.append((buffers["marker"].dtype, buffers["marker"].copy()))
+        run_batch(self, integrator, batch, buffers, **kw)
+        buffers["marker"][:] = batch.masses.shape[1]
 
-    monkeypatch.setattr(gc.Integrator, "integrate_batch", integrate_and_mark)
+    monkeypatch.setattr(Backend, "run_batch", run_and_mark)
     return seen
 
 
