@@ -8,7 +8,8 @@ goes through. Time is charged to the innermost phase running on the main thread 
 phases add up to the total:
 
 * ``imports``: every import (the command's own modules and those loaded on first use inside it);
-* ``integration``: ``Integrator.integrate_batch`` (the kernels and their Python wrapper; not trimmed here);
+* ``integration``: ``Backend.run_batch`` (the batch seam the ensembles call) and ``Integrator.integrate_batch``
+  (what earlier versions called; the kernels and their Python wrapper; not trimmed here);
 * ``chains``: the family's random draws and chain arrays, the chunk's buffers (``compute_chunk``);
 * ``store: create``, ``store: write``, ``store: finalize``, ``store: read``: the Zarr store (creation,
   one write per chunk, the averaged pulse at the end, reading it again for the statistics);
@@ -154,6 +155,10 @@ def subclasses(cls):
 
 for cls in subclasses(integ_mod.Integrator):
     patch(cls, "integrate_batch", "integration")
+_backends = _mod("granchain.backends")
+if _backends is not None and hasattr(_backends, "Backend"):
+    for cls in subclasses(_backends.Backend):  # (a version without run_batch: nothing patched here)
+        patch(cls, "run_batch", "integration")
 for cls in subclasses(fam_mod.ChainFamily):
     patch(cls, "draw_batch", "chains")
     patch(cls, "build", "chains")
