@@ -175,7 +175,7 @@ class Backend:
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state); returns
         (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c) (see ``Integrator.integrate``):
-        the low-level contract :meth:`run` wraps."""
+        the low-level contract ``Backend.run`` wraps."""
         raise NotImplementedError
 
     def run_batch(self, integrator, batch, buffers: dict, *, t_grid, t_max, controls, scale: float = 1.0,
