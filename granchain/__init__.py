@@ -6,7 +6,7 @@ The founding reference is U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg,
 
 from ._version import __version__
 from .model.chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered, wall_stiffness
-from .model.contacts import PowerLaw, Precompression, Striker, Viscoelastic, Viscous
+from .model.contacts import ElasticPlastic, PowerLaw, Precompression, Striker, Viscoelastic, Viscous
 from .model.distributions import Mixture, Truncated, Uniform, as_distribution, small_radius_distribution
 from .model.effective import effective, effective_parameters
 from .model.random import draw_small_radii, random_decorated, realization_rng
@@ -81,6 +81,7 @@ __all__ = [
     "Verlet",
     "Viscoelastic",
     "Viscous",
+    "ElasticPlastic",
     "VerletStabilityWarning",
     "__version__",
     "as_distribution",

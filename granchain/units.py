@@ -222,6 +222,10 @@ class Material:
         A label (used in reports and Dataset attributes).
     source : str
         Where the values come from.
+    yield_stress : float, str or pint.Quantity, optional
+        The uniaxial yield stress (a number is Pa, or ``"1.5 GPa"``): where spheres of this material stop
+        being elastic (:attr:`limiting_pressure`, :attr:`yield_speed`, ``granchain.ElasticPlastic``).
+        None (the presets): not given; the contacts stay elastic.
     """
 
     E: float
@@ -229,6 +233,7 @@ class Material:
     rho: float
     name: str = "custom"
     source: str = field(default="", repr=False)
+    yield_stress: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "E", _positive("E (Young's modulus, Pa)", self.E, "pressure"))
@@ -241,6 +246,30 @@ class Material:
             raise ValueError(f"E = {self.E:g} Pa is outside 1e5..2e12 Pa: give Young's modulus in Pa (200 GPa = 2e11)")
         if self.rho < 50.0 or self.rho > 3e4:  # catches g/cm^3 given as kg/m^3
             raise ValueError(f"rho = {self.rho:g} kg/m^3 is outside 50..30000 kg/m^3: give the density in kg/m^3 (steel: 7850)")
+        if self.yield_stress is not None:
+            object.__setattr__(self, "yield_stress", _positive("yield_stress (Pa)", self.yield_stress, "pressure"))
+            if self.yield_stress >= self.E:
+                raise ValueError(f"yield_stress = {self.yield_stress:g} Pa is not below Young's modulus E = {self.E:g} Pa: "
+                                 "give the yield stress in Pa (hardened steel: about 1.5e9)")
+
+    @property
+    def limiting_pressure(self) -> float:
+        """Thornton's limiting contact pressure p_y, Pa: the maximum Hertz pressure at which two spheres of
+        this material first yield, p_y = 1.60 sigma_y (K. L. Johnson, *Contact Mechanics*, Cambridge 1985,
+        Sec. 6.2, Tresca or von Mises with nu = 0.3; C. Thornton, J. Appl. Mech. 64, 383 (1997))."""
+        if self.yield_stress is None:
+            raise ValueError(f"the material {self.name!r} has no yield_stress: give Material(..., yield_stress=...) "
+                             "(e.g. dataclasses.replace(granchain.units.STEEL, yield_stress=\"1.5 GPa\"))")
+        return 1.60 * self.yield_stress
+
+    @property
+    def yield_speed(self) -> float:
+        """The relative impact speed, m/s, at which two equal spheres of this material first yield (any
+        size): (1/2) (m/2) V_y^2 = (2/5) K delta_y^(5/2) with delta_y = (pi p_y / (2 E*))^2 R/2, i.e.
+        V_y = (pi^2 / sqrt(160)) (p_y^5 / (E*^4 rho))^(1/2); half of Thornton's 1.56 (p_y^5 / (E*^4 rho))^(1/2)
+        for a sphere on a rigid wall of the same E* (C. Thornton, J. Appl. Mech. 64, 383 (1997))."""
+        p, e = self.limiting_pressure, self.effective_modulus
+        return math.pi**2 / math.sqrt(160.0) * math.sqrt(p**5 / (e**4 * self.rho))
 
     @property
     def effective_modulus(self) -> float:

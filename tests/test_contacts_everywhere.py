@@ -195,7 +195,7 @@ def test_cli_ensemble_refuses_before_writing_and_info_names_the_contacts(tmp_pat
                  "--precompression", "0.1", "--striker-mass", "2", "--out", str(good), "--quiet"]) == 0
     assert main(["info", str(good)]) == 0
     text = capsys.readouterr().out
-    assert "contacts     viscoelastic, gamma = 0.05, precompressed by F0 = 0.1, struck by a striker of mass 2" in text
+    assert "contacts     viscoelastic gamma = 0.05, precompressed by F0 = 0.1, struck by a striker of mass 2" in text
 
 
 def test_materials_and_elastic_walls_reduce_to_one_material():

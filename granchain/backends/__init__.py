@@ -43,12 +43,14 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def final_energy_momentum(chain, x, v, info) -> tuple[float, float]:
+def final_energy_momentum(chain, x, v, info, history=None) -> tuple[float, float]:
     """(E_end, P_end) of ``chain`` in the final state (x, v) of a run whose record is ``info``: the
     energy with what a viscoelastic law dissipated added (``info``'s dissipated slot) and the energies
     that granules leaving a trailing window had then, summed by the kernels' own routines
     (``kernels.forces.final_energy``, ``total_momentum``) whichever backend ran: ``simulate``'s
-    ``energy_error`` and ``momentum_error`` come from here."""
+    ``energy_error`` and ``momentum_error`` come from here. For a law with memory (``ContactLaw.history``)
+    the contacts' elastic energy depends on ``history``, their final per-contact state: the law's own
+    ``stored_energy`` (measured from the static state, as :func:`kernels.forces.add_potential` does)."""
     from .kernels.forces import final_energy, total_momentum
     from .kernels.records import INFO_DISSIPATED
     from .numba_backend import kernel_array, model_params
@@ -56,30 +58,48 @@ def final_energy_momentum(chain, x, v, info) -> tuple[float, float]:
     dissipated = float(info[INFO_DISSIPATED])
     # (the chain's arrays as the kernels take them, writable: the types the ensemble kernel compiles these for)
     masses, stiffness = kernel_array(chain.masses), kernel_array(chain.stiffness)
-    e1 = final_energy(x, v, masses, stiffness, model_params(chain), info) + dissipated
+    if chain.contact.history:
+        from ..model.contacts import Precompression
+
+        law, moving = chain.contact, np.isfinite(masses)
+        d0 = Precompression(chain.static_force).overlaps(stiffness, chain.n)
+        D = x[:-1] - x[1:]
+        stored = (law.stored_energy(d0 + D, stiffness, history) - law.stored_energy(d0, stiffness)
+                  - law.elastic_force(d0, stiffness) * D)
+        e1 = 0.5 * float(np.sum(masses[moving] * v[moving] ** 2)) + float(np.sum(stored)) + dissipated
+    else:
+        e1 = final_energy(x, v, masses, stiffness, model_params(chain), info) + dissipated
     return e1, total_momentum(v, masses)
 
 
-def effective_integrator(integrator, chain):
+def effective_integrator(integrator, chain, contact=None):
     """The integrator as it actually runs on ``chain`` (a :class:`granchain.Chain`, or its boundary
-    value): its goal-oriented zones (relaxed zone, trailing window) switched off when the boundary
-    does not license them (a fixed wall sends the pulse back through the granules behind the front),
-    else ``integrator`` itself."""
+    value and its contact law ``contact``): its goal-oriented zones (relaxed zone, trailing window)
+    switched off when the boundary does not license them (a fixed wall sends the pulse back through the
+    granules behind the front) or the contacts have a history, else ``integrator`` itself."""
     boundary = getattr(chain, "boundary", chain)
     if integrator.goal_oriented and not boundary.licenses_goal_control:
+        return dataclasses.replace(integrator, relaxed_lag=None, window_lag=None)
+    law = getattr(chain, "contact", None) if contact is None else contact
+    if integrator.goal_oriented and getattr(law, "history", False):
+        # granules left behind a trailing window would take their contacts' histories with them
         return dataclasses.replace(integrator, relaxed_lag=None, window_lag=None)
     return integrator
 
 
-def integrator_as_run(integrator, chain) -> dict:
+def integrator_as_run(integrator, chain, contact=None) -> dict:
     """The record (``describe()``) of the integrator as it runs on ``chain`` (or at its boundary),
     with ``"goal_control"`` saying why when the boundary switched its goal-oriented zones off: the
     record a result carries next to the integrator that was asked for, so that it never claims a
     control that did not run."""
-    ran = effective_integrator(integrator, chain)
+    ran = effective_integrator(integrator, chain, contact)
     record = ran.describe()
     if ran is not integrator:
-        record["goal_control"] = f"off: {getattr(chain, 'boundary', chain).why_no_goal_control}"
+        boundary = getattr(chain, "boundary", chain)
+        why = (boundary.why_no_goal_control if not boundary.licenses_goal_control else
+               "the contacts have a history (their largest overlaps), which granules left behind a trailing window "
+               "would take with them")
+        record["goal_control"] = f"off: {why}"
     return record
 
 
@@ -132,6 +152,9 @@ class Backend:
     #: law's own class: a subclass that does not declare its form again may have changed the force, and
     #: is refused); None: any law (code that calls the law's own NumPy methods).
     law_forms: tuple | None = ("power-law",)
+    #: Whether :meth:`integrate` carries a per-contact state (its ``history`` argument) for the laws with
+    #: memory (``ContactLaw.history``).
+    carries_history: bool = False
 
     def check(self, integrator, chain) -> None:
         """Refuse an integrator whose requirements the chain's model does not meet, and a contact law
@@ -141,7 +164,11 @@ class Backend:
                              f"the contact law {chain.contact!r} depends on velocities: use DP5 or DOP853")
         if self.law_forms is not None and type(chain.contact).__dict__.get("form") not in self.law_forms:
             raise ValueError(f"the {self.name} backend has no code for the contact law {chain.contact!r}; it runs "
-                             f"the laws of forms {', '.join(self.law_forms)}")
+                             f"the laws of forms {', '.join(self.law_forms)} (the SciPy reference, "
+                             f"integrator=granchain.DOP853(), runs any law)")
+        if chain.contact.history and not self.carries_history:
+            raise ValueError(f"the {self.name} backend carries no per-contact history, which the contact law "
+                             f"{chain.contact!r} needs: run it with integrator=granchain.DOP853() (the SciPy reference)")
 
     def prepare(self, integrators):
         """Start what makes the later of ``integrators`` (in the order a run uses them) ready sooner, e.g. a
@@ -164,10 +191,11 @@ class Backend:
         x = np.zeros(chain.size)
         v = np.zeros(chain.size)
         v[0] = chain.initial_velocity
+        state = history_state(chain)
         status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c = self.integrate(
             integrator, chain, x, v, t_grid=t_grid, t_max=t_max, stop_at_exit=stop_at_exit, controls=controls,
-            sensed=sensed)
-        energy, momentum = final_energy_momentum(chain, x, v, info)
+            sensed=sensed, **state)
+        energy, momentum = final_energy_momentum(chain, x, v, info, **state)
         return RunRecord(int(status), peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c, float(info[INFO_T_END]),
                          float(info[INFO_EXIT]), int(info[INFO_STEPS]), int(info[INFO_REJECTED]), int(info[INFO_EVALUATIONS]),
                          float(info[INFO_DISSIPATED]), x, v, float(energy), float(momentum))
@@ -175,7 +203,8 @@ class Backend:
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
         """Integrate ``chain`` from (x, v) at t = 0 (both updated in place to the final state); returns
         (status, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, grid_c) (see ``Integrator.integrate``):
-        the low-level contract ``Backend.run`` wraps."""
+        the low-level contract ``Backend.run`` wraps. A backend that :attr:`carries_history` takes the keyword
+        ``history`` too, the per-contact state of a law with memory (in and out, like x and v)."""
         raise NotImplementedError
 
     def run_batch(self, integrator, batch, buffers: dict, *, t_grid, t_max, controls, scale: float = 1.0,
@@ -221,16 +250,20 @@ class Backend:
             chain = batch_chain(masses[r], stiffness[r], n, initial_velocity[r], observed, model)
             x, v = np.zeros(M), np.zeros(M)
             v[0] = initial_velocity[r]
+            state = history_state(chain)
             st, info, peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f, _ = self.integrate(
                 integrator, chain, x, v, t_grid=t_grid, t_max=float(limits[r]), stop_at_exit=chain.ends_at_exit,
-                controls=controls)
+                controls=controls, **state)
             out["peak_velocity"][r], out["peak_time"][r] = peak_v, peak_t
             gather_forces(peak_f, peak_ft, contacts, out["peak_force"][r], out["peak_force_time"][r])
             if wall:
                 out["peak_wall_force"][r], out["peak_wall_force_time"][r] = peak_f[-1], peak_ft[-1]
             out["status"][r], out["n_steps"][r], out["t_end"][r] = st, int(info[INFO_STEPS]), info[INFO_T_END]
             e0 = impulse_energy(masses[r, 0], initial_velocity[r])
-            e1 = final_energy(x, v, masses[r], stiffness[r], model_params(chain), info) + info[INFO_DISSIPATED]
+            if state:
+                e1 = final_energy_momentum(chain, x, v, info, **state)[0]
+            else:
+                e1 = final_energy(x, v, masses[r], stiffness[r], model_params(chain), info) + info[INFO_DISSIPATED]
             out["energy_error"][r] = (e1 - e0) / e0
             if "dissipated_energy" in out:
                 out["dissipated_energy"][r] = info[INFO_DISSIPATED]
@@ -245,6 +278,15 @@ class Backend:
 
     def __repr__(self) -> str:
         return f"<granchain backend {self.name!r}>"
+
+
+def history_state(chain) -> dict:
+    """The per-contact state a run of ``chain`` carries besides (x, v), as ``Backend.integrate``'s keywords:
+    ``{"history": the contacts' largest overlaps}`` for a law with memory (virgin: its yield overlaps), else
+    nothing."""
+    if not chain.contact.history:
+        return {}
+    return {"history": np.array(chain.contact.yield_overlaps(chain.stiffness), dtype=float)}
 
 
 def batch_chain(masses, stiffness, n, initial_velocity, observed, model: dict | None = None):

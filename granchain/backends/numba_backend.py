@@ -72,8 +72,9 @@ def model_params(chain) -> Params:
     law = chain.contact
     # a law of no compiled form (run by the SciPy backend) gets the default code: the energies read none
     damping = LAW_FORMS.get(type(law).__dict__.get("form"), DAMPING_KUWABARA_KONO)
+    yield_overlap = float(law.reference_yield_overlap) if law.history else 0.0  # Thornton's contact (forces.plastic_force)
     return Params(float(chain.n), power_code(chain.n), chain.boundary.wall, float(law.gamma), float(chain.static_force),
-                  bool(law.clamp), damping)
+                  bool(law.clamp), damping, yield_overlap)
 
 
 def model_record(chain) -> Model:
@@ -111,6 +112,8 @@ class NumbaBackend(Backend):
 
     name = "numba"
     law_forms = tuple(LAW_FORMS)
+    #: Thornton's contacts: each one's largest overlap is state the DP5 step loop carries (``kernels.rkloop``).
+    carries_history = True
 
     def check(self, integrator, chain) -> None:
         """Besides :meth:`Backend.check`: the kernels integrate only the granules the pulse has reached
@@ -135,14 +138,15 @@ class NumbaBackend(Backend):
     def release(self, handle) -> None:
         warm.stop(handle)
 
-    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None, history=None):
         self.check(integrator, chain)
         integrator.check_chains(chain.masses[None], chain.stiffness[None], chain.n, chain.initial_velocity)
         method = method_record(effective_integrator(integrator, chain))
         run = run_record(chain, t_grid, t_max, stop_at_exit, controls, sensed)
         out = outputs(chain.observed.size, t_grid.size, chain.size, run.contacts.size)
         model = model_record(chain)
-        status = integrate_chain(method, model, run, State(x, v), out)
+        status = integrate_chain(method, model, run, State(x, v, np.zeros(chain.size - 1) if history is None else history),
+                                 out)
         return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f, out.grid_c
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,

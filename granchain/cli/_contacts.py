@@ -1,5 +1,5 @@
-"""Real contacts on the command line: a static load, dissipation (Kuwabara-Kono or viscous), a striker
-and the wall's material.
+"""Real contacts on the command line: a static load, dissipation (Kuwabara-Kono or viscous), yielding
+contacts (Thornton's elastic-plastic law), a striker and the wall's material.
 
 ``granchain pulse`` and ``granchain ensemble`` take them (:func:`add_contact_arguments`), ``granchain
 design`` the dissipative laws (:func:`add_damping_arguments`);
@@ -54,6 +54,11 @@ def add_damping_arguments(group) -> None:
         "touch, a damping force proportional to their relative velocity, which may pull as they separate (their form; "
         "granchain.Viscous(gamma, clamp=True) in Python never pulls): GAMMA, the damping coefficient (rescaled, in "
         "units of M_1/T; or a quantity such as 0.5kg/s)"))
+    damp.add_argument("--yield-speed", metavar="V", help=(
+        "elastic-plastic contacts (Thornton 1997): Hertz up to a limiting contact pressure, then a force growing "
+        "linearly with the overlap, and Hertzian unloading from each contact's largest overlap; V, the relative impact "
+        "speed at which two equal granules first yield (rescaled: the struck granule's speed is 1; or a speed such as "
+        "0.1m/s, with the physical-unit options). Hardened steel on steel yields near 0.1 m/s"))
     damp.add_argument("--restitution", metavar="E@V", help=(
         "viscoelastic contacts (clamped, as --dissipation) calibrated to a coefficient of restitution E in [0.05, 1] of "
         "two reference granules colliding at speed V (rescaled; or a speed such as 1m/s), e.g. 0.9@1 or 0.9@1m/s"))
@@ -131,7 +136,7 @@ def contacts_from_args(args, units, n: float) -> dict:
     """The real contacts the options ask for: {"contact": law or None, "static_force": F0,
     "striker_mass": M or None, "wall_material": name or None} in rescaled units (errors say what to
     change, quoting what was typed)."""
-    from ..model.contacts import Precompression, Viscoelastic, Viscous
+    from ..model.contacts import ElasticPlastic, Precompression, Viscoelastic, Viscous
 
     text = getattr(args, "precompression", None)
     force = _quantity(text, "force", "--precompression", units, lambda s: s.force,
@@ -162,6 +167,13 @@ def contacts_from_args(args, units, n: float) -> dict:
         if not (math.isfinite(gamma) and gamma >= 0):
             raise ValueError(f"--viscous-damping must be finite and >= 0 (a damping coefficient; 0: elastic), got {text!r}")
         law = _checked("--viscous-damping", text, lambda: Viscous(gamma, n))
+    text = getattr(args, "yield_speed", None)
+    if text is not None:
+        speed = _quantity(text, "speed", "--yield-speed", units, lambda s: s.velocity,
+                          "a speed > 0 (rescaled, e.g. 0.1, or with a unit such as 0.1m/s)")
+        if not speed > 0:
+            raise ValueError(f"--yield-speed must be > 0 (a speed at which contacts first yield), got {text!r}")
+        law = _checked("--yield-speed", text, lambda: ElasticPlastic(speed, n))
     rest = _restitution(getattr(args, "restitution", None), units)
     if rest is not None:
         law = _checked("--restitution", args.restitution, lambda: Viscoelastic.from_restitution(rest[0], rest[1], n=n))

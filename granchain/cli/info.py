@@ -136,7 +136,12 @@ def _contacts_line(family: dict) -> str:
     parts = []
     law = family.get("contact") or (family.get("contact_model")
                                     if family.get("contact_model", {}).get("law") not in (None, "power-law") else None)
-    parts.append(f"{law['law']}, gamma = {law['gamma']:.6g}" if law else f"elastic power law, n = {family.get('n', 2.5):g}")
+    if law:
+        from ..model.contacts import law_from_record
+
+        parts.append(law_from_record(law).label(6, " = "))  # the law says what it is
+    else:
+        parts.append(f"elastic power law, n = {family.get('n', 2.5):g}")
     f0 = family.get("static_force") or family.get("contact_model", {}).get("static_force")
     parts.append(f"precompressed by F0 = {f0:.6g}" if f0 else "unloaded")
     m = family.get("striker_mass") or family.get("contact_model", {}).get("striker_mass")

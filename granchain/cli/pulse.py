@@ -225,7 +225,8 @@ def run(args) -> int:
         if sensors is not None:
             print(_sensor_summary(result, units))
         if chain.contact.dissipates:
-            e = f"# dissipated energy {result.dissipated_energy:.6g} of {chain.energy:.6g} (rescaled)"
+            e = (f"# dissipated energy{' (plastic work)' if chain.contact.history else ''} {result.dissipated_energy:.6g} "
+                 f"of {chain.energy:.6g} (rescaled)")
             if units is not None:
                 e += f"; {result.dissipated_energy * units.energy:.6g} J"
             print(e)

@@ -35,7 +35,8 @@ def integrators_as_run(spec) -> dict:
     from ..model.contacts import FreeEnd, LoadedEnd, FixedWall
 
     boundary = FixedWall if spec.family.wall else (LoadedEnd if spec.family.static_force > 0 else FreeEnd)
-    return {kind: integrator_as_run(integ, boundary) for kind, integ in spec.chain_integrators.items()}
+    law = spec.family.contact_law
+    return {kind: integrator_as_run(integ, boundary, law) for kind, integ in spec.chain_integrators.items()}
 
 
 def _attrs(spec) -> dict:

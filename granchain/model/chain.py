@@ -164,6 +164,8 @@ class Chain:
                 f"{v0:g} moves its contact by ~{ratio:.1e} of the static overlap, which double precision (2.2e-16) does "
                 f"not resolve to the accuracy of the peaks; the dynamic part must be >= {MIN_DYNAMIC_RATIO:g} of it, "
                 f"so give F0 <= {_largest_static_force(float(m[0]), float(c[0]), n, v0):.3g} (or strike harder)")
+        if contact.history:
+            _check_yielding(contact, c, load, self.meta)
         if self.observed is None:
             obs = np.arange(int(striker), m.size - wall, dtype=np.int64)
         else:
@@ -467,6 +469,24 @@ def _radii_with_wall(radii, wall: bool) -> np.ndarray:
             raise ValueError("radii of a chain ending in a wall must end with inf (the wall's radius)")
         return np.append(positive_array("radii", r[:-1]), np.inf)
     return positive_array("radii", radii)
+
+
+def _check_yielding(law, stiffness, load, meta) -> None:
+    """Refuse what the elastic-plastic law (``granchain.ElasticPlastic``) cannot describe here: a static load
+    that has already yielded a contact (the chain would not start in its elastic static state), and granules
+    of several materials, whose contacts' yield overlaps do not follow from their prefactors alone."""
+    if meta and meta.get("materials") and len({getattr(mt, "name", mt) for mt in meta["materials"]}) > 1:
+        raise ValueError("the elastic-plastic contact takes each contact's yield overlap from its prefactor, which holds for "
+                         "granules of one material: build the chain from one material (or use an elastic law for a "
+                         "chain of several)")
+    if load.force > 0.0:
+        dy = law.yield_overlaps(stiffness)
+        d0 = load.overlaps(stiffness, 2.5)
+        if np.any(d0 >= dy):
+            k = int(np.argmax(d0 / dy))
+            raise ValueError(f"the static force F0 = {load.force:g} yields contact {k} before the chain is struck (static "
+                             f"overlap {d0[k]:.4g} >= its yield overlap {dy[k]:.4g}): give a smaller F0 or a higher "
+                             "yield speed, so that the chain starts elastic")
 
 
 def _check_radii(r: np.ndarray, name: str = "radii") -> None:

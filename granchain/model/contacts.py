@@ -32,7 +32,7 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-__all__ = ["ContactLaw", "PowerLaw", "Viscoelastic", "Viscous", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker",
+__all__ = ["ContactLaw", "PowerLaw", "Viscoelastic", "Viscous", "ElasticPlastic", "Precompression", "FreeEnd", "LoadedEnd", "FixedWall", "Impulse", "Striker",
            "MAX_STATIC_FORCE", "MIN_DYNAMIC_RATIO", "law_from_record"]
 
 #: The largest static force :class:`Precompression` takes (rescaled units, whatever the chain): a reference
@@ -64,6 +64,9 @@ class ContactLaw:
 
     record_name: ClassVar[str] = ""
     form: ClassVar[str] = ""
+    #: The force depends on the contact's past too (a per-contact state the integration carries, e.g. the
+    #: largest overlap of :class:`ElasticPlastic`); only code that carries it runs such a law.
+    history: ClassVar[bool] = False
     _registry: ClassVar[dict] = {}
 
     def __init_subclass__(cls, **kwargs):
@@ -314,6 +317,191 @@ class Viscous(ContactLaw):
     def describe(self) -> dict:
         """The law as a record (``"clamp": True`` only for the clamped variant)."""
         return {"law": "viscous", "n": self.n, "gamma": self.gamma, **({"clamp": True} if self.clamp else {})}
+
+
+@dataclass(frozen=True)
+class ElasticPlastic(ContactLaw):
+    """Thornton's elastic-perfectly plastic sphere contact (C. Thornton, J. Appl. Mech. 64, 383 (1997)):
+    a contact with memory, for Hertz spheres (n = 5/2).
+
+    Below the yield overlap delta_y a contact is Hertzian, F = c delta^(3/2). Hertz's maximum contact
+    pressure p0 = (2 E* / pi) (delta / R*)^(1/2) reaches the limiting pressure p_y there; beyond it the
+    pressure is capped at p_y and the force grows linearly with the overlap, with the Hertz slope at
+    delta_y (Thornton's Eq. (16), F = F_y + pi p_y R* (delta - delta_y); in granchain's notation
+    pi p_y R* = (3/2) c delta_y^(1/2)):
+
+        F_load(delta) = c delta_y^(1/2) (3 delta - delta_y) / 2,            delta >= delta_y.
+
+    Unloading from the largest overlap delta_m reached (force F* = F_load(delta_m)) is Hertzian with an
+    enlarged radius of curvature R_p = R* (2 f + 1)^(3/2) / (3^(3/2) f), f = F* / F_y (Thornton's
+    Eq. (20) written with the yield force F_y = c delta_y^(3/2)), so that
+
+        F_unload(delta) = c_p (delta - delta_p)^(3/2),   c_p = c ((2 f + 1) / 3)^(3/4) f^(-1/2),
+        delta_p = delta_m - (F* / c_p)^(2/3),
+
+    and 0 below the plastic overlap delta_p (the dent left). Reloading follows the unloading curve up to
+    delta_m, then the loading line again. Each contact remembers delta_m (its history, carried by the
+    integration as part of the state); a contact that never passed delta_y is Hertzian throughout.
+
+    The energy the contact does not give back is the plastic work W_p(delta_m) = W_load(delta_m)
+    - (2/5) F* (delta_m - delta_p) (:meth:`plastic_work`), reported as the run's ``dissipated_energy``;
+    kinetic + elastic (:meth:`stored_energy`) + plastic = initial is the run's energy check.
+
+    Parametrisation (rescaled units): ``yield_speed`` v_y, the relative impact speed at which two
+    reference granules (radius 1, mass 1, prefactor 1) first yield: (1/2)(1/2) v_y^2 = (2/5) delta_y^(5/2).
+    For spheres of one material the yield speed of a pair of equal spheres does not depend on their size,
+    and each contact's yield overlap follows from its prefactor: delta_y,k = c_k^2 delta_y,ref (the limiting
+    pressure is a property of the material; :meth:`yield_overlaps`). From a material's yield stress, in SI
+    units: :meth:`from_material`. The two-sphere coefficient of restitution has Thornton's closed form
+    (:meth:`restitution`): 1 below v_y, falling as v^(-1/4) far above it.
+    """
+
+    yield_speed: float
+    n: float = 2.5
+
+    record_name: ClassVar[str] = "elastic-plastic"
+    form: ClassVar[str] = "thornton"
+    #: Positions alone give the force only with the contact's history: not conservative, and it dissipates.
+    conservative: ClassVar[bool] = False
+    #: The force depends on the contact's past (its largest overlap), a per-contact state the integration
+    #: carries; an integrator or backend without that state refuses the law.
+    history: ClassVar[bool] = True
+    gamma: ClassVar[float] = 0.0
+    clamp: ClassVar[bool] = True
+
+    def __post_init__(self):
+        v = _real(self.yield_speed, "yield_speed (the relative impact speed at which two reference granules first yield)")
+        if not (math.isfinite(v) and v > 0.0):
+            raise ValueError(f"yield_speed must be finite and > 0 (rescaled: the struck granule's speed is 1), got "
+                             f"{self.yield_speed!r}; an elastic contact is granchain.PowerLaw")
+        n = _real(self.n, "n (the exponent of the contact)")
+        if n != 2.5:
+            raise ValueError(f"Thornton's elastic-plastic contact is Hertz's (n = 5/2) up to yield: its limiting contact "
+                             f"pressure is that of two elastic spheres; got n = {self.n!r} (give n = 2.5)")
+        object.__setattr__(self, "yield_speed", v)
+        object.__setattr__(self, "n", 2.5)
+
+    @classmethod
+    def from_material(cls, material, impact_speed) -> "ElasticPlastic":
+        """The law of spheres of ``material`` (a ``granchain.units.Material`` with a ``yield_stress``, or a
+        preset name) for a chain struck at ``impact_speed`` (m/s, or a quantity such as ``"5 m/s"``): the
+        rescaled yield speed is V_y / V_1, with V_y of :meth:`granchain.units.Material.yield_speed`."""
+        from ..units import get_material, si_value
+
+        mat = get_material(material) if isinstance(material, str) else material
+        v1 = si_value(impact_speed, "speed", "the impact speed")
+        if not (math.isfinite(v1) and v1 > 0.0):
+            raise ValueError(f"the impact speed must be finite and > 0, got {impact_speed!r}")
+        return cls(mat.yield_speed / v1)
+
+    @property
+    def reference_yield_overlap(self) -> float:
+        """delta_y of two reference granules (reduced mass 1/2, prefactor 1): (5 v_y^2 / 8)^(2/5)."""
+        return (0.625 * self.yield_speed**2) ** 0.4
+
+    def yield_overlaps(self, stiffness):
+        """Each contact's yield overlap, c_k^2 delta_y,ref (NumPy): for spheres of one material c_k =
+        sqrt(2 R*_k) (Eq. r-prime) and delta_y = R* (pi p_y / (2 E*))^2 grows as R*; a wall of the
+        granules' material (c = sqrt(2 R)) included."""
+        import numpy as np
+
+        c = np.asarray(stiffness, dtype=float)
+        return c * c * self.reference_yield_overlap
+
+    def _branches(self, d, c, history):
+        """(loading, c_p, delta_p, dy) for compressions ``d``: ``loading`` where d reaches the history
+        (then the force is the loading line), else the unloading curve's c_p and delta_p from the history."""
+        import numpy as np
+
+        d = np.asarray(d, dtype=float)
+        c = np.asarray(c, dtype=float)
+        dy = self.yield_overlaps(c)
+        m = dy if history is None else np.maximum(np.asarray(history, dtype=float), dy)
+        m = np.maximum(m, d)  # loading past the history moves it
+        f = 1.5 * m / dy - 0.5  # F* / F_y
+        cp = c * ((2.0 * f + 1.0) / 3.0) ** 0.75 / np.sqrt(f)
+        dp = m - f * dy * np.sqrt(3.0 / (2.0 * f + 1.0))  # delta_m - (F* / c_p)^(2/3)
+        return m, cp, dp, dy
+
+    def plastic_overlap(self, history, stiffness):
+        """delta_p, the compression at which a contact whose largest overlap is ``history`` unloads to zero force
+        (the dent it keeps; 0 for a contact that never yielded). Its spheres touch, with no force, down to it."""
+        m, cp, dp, dy = self._branches(0.0, stiffness, history)
+        return dp
+
+    def force(self, compression, stiffness, rate=None, history=None):
+        """The force at compression ``compression`` (NumPy, any shape) of contacts whose largest overlap so
+        far is ``history`` (None: virgin contacts): the loading line where the compression reaches the
+        history, else the unloading curve from it; Hertz's c delta^(3/2) below yield. ``rate`` is not read."""
+        import numpy as np
+
+        d = np.asarray(compression, dtype=float)
+        m, cp, dp, dy = self._branches(d, stiffness, history)
+        e = np.maximum(d - dp, 0.0)
+        return np.where(d > 0.0, cp * e * np.sqrt(e), 0.0)
+
+    def stored_energy(self, compression, stiffness, history=None):
+        """The elastic energy a contact gives back if unloaded from ``compression``: (2/5) c_p
+        (delta - delta_p)^(5/2) of the unloading curve through it (Hertz's (2/5) c delta^(5/2) below yield)."""
+        import numpy as np
+
+        d = np.asarray(compression, dtype=float)
+        m, cp, dp, dy = self._branches(d, stiffness, history)
+        e = np.maximum(d - dp, 0.0)
+        return np.where(d > 0.0, 0.4 * cp * e * e * np.sqrt(e), 0.0)
+
+    def plastic_work(self, history, stiffness):
+        """The energy a contact whose largest overlap is ``history`` has dissipated plastically:
+        W_load(delta_m) - (2/5) F* (delta_m - delta_p), 0 below yield (NumPy)."""
+        import numpy as np
+
+        c = np.asarray(stiffness, dtype=float)
+        dy = self.yield_overlaps(c)
+        m = np.maximum(np.asarray(history, dtype=float), dy)
+        u = m / dy - 1.0
+        fy_dy = c * dy * dy * np.sqrt(dy)  # F_y delta_y
+        loading = fy_dy * (0.4 + u + 0.75 * u * u)  # the work along Hertz to delta_y, then the loading line
+        f = 1.0 + 1.5 * u
+        returned = 0.4 * fy_dy * f * f * np.sqrt(3.0 / (2.0 * f + 1.0))  # (2/5) F* (delta_m - delta_p)
+        return np.where(c > 0.0, loading - returned, 0.0)
+
+    def elastic_force(self, compression, stiffness):
+        """Hertz's c delta^(3/2) (the virgin contact's force below yield, and the static state's)."""
+        return super().elastic_force(compression, stiffness)
+
+    def force_rate(self, d, w, dw, c):
+        """dF/dt on the loading branch (the force peaks with the compression on either branch)."""
+        if d <= 0.0:
+            return 0.0
+        dy = float(self.yield_overlaps(c))
+        slope = 1.5 * c * math.sqrt(d) if d < dy else 1.5 * c * math.sqrt(dy)
+        return slope * w
+
+    @staticmethod
+    def restitution_ratio(ratio: float) -> float:
+        """Thornton's coefficient of restitution of two spheres at r = v_y / v (impact speed v):
+        e = sqrt(6 sqrt(3) / 5) sqrt(1 - r^2 / 6) [r / (r + 2 sqrt(6/5 - r^2 / 5))]^(1/4) for r < 1, and 1
+        for r >= 1 (Thornton 1997, Eq. (34); derived again in ``docs/explanation/contacts.md``)."""
+        r = float(ratio)
+        if r >= 1.0:
+            return 1.0
+        return math.sqrt(6.0 * math.sqrt(3.0) / 5.0) * math.sqrt(1.0 - r * r / 6.0) * (
+            r / (r + 2.0 * math.sqrt(1.2 - 0.2 * r * r))) ** 0.25
+
+    def restitution(self, speed: float, *, mass: float = 1.0, stiffness: float = 1.0, other_mass: float | None = None) -> float:
+        """The closed-form coefficient of restitution of two spheres colliding at relative speed ``speed``:
+        :meth:`restitution_ratio` at r = v_y,pair / speed, where the pair's yield speed follows from its
+        reduced mass and prefactor (the reference pair by default: two granules of mass 1, prefactor 1)."""
+        mu = mass * (mass if other_mass is None else other_mass) / (mass + (mass if other_mass is None else other_mass))
+        dy = float(self.yield_overlaps(stiffness))
+        vy = math.sqrt(0.8 * stiffness * dy * dy * math.sqrt(dy) / mu)  # (1/2) mu v_y^2 = (2/5) c delta_y^(5/2)
+        return self.restitution_ratio(vy / speed)
+
+    def label(self, digits: int = 6, eq: str = " = ") -> str:
+        return f"elastic-plastic v_y{eq}{self.yield_speed:.{digits}g}"
+
+    def describe(self) -> dict:
+        return {"law": "elastic-plastic", "n": self.n, "yield_speed": self.yield_speed}
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from numba import njit, prange
 
 from ..._status import SUCCESS
 from .aligned import accumulate_aligned
-from .forces import final_energy, impulse_energy
+from .forces import final_energy, impulse_energy, plastic_energy
 from .jit import JIT, JIT_PARALLEL
 from .records import (
     INFO_DISSIPATED,
@@ -136,6 +136,7 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
         x = np.zeros(M)
         v = np.zeros(M)
         v[0] = v_init[r]  # the impulse on granule 1 (granchain.model.contacts.Impulse)
+        history = np.zeros(M - 1)  # each contact's largest overlap (Thornton's law; the kernel starts it at yield)
         grid_v = np.zeros((T, K))
         pf = np.zeros(M - 1)
         pft = np.zeros(M - 1)
@@ -143,7 +144,7 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
         info = np.zeros(INFO_SIZE)
         grid_c = np.zeros((T, sensed.shape[0]))
         row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed, pulse_end)
-        st = kernel(method, Model(m, c, params), row_run, State(x, v),
+        st = kernel(method, Model(m, c, params), row_run, State(x, v, history),
                              Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
         gather_forces(pf, pft, contacts, peak_f[r], peak_ft[r])
         if wall:
@@ -154,7 +155,10 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
         t_end[r] = info[INFO_T_END]
         e0 = impulse_energy(m[0], v_init[r])
         dissipated[r] = info[INFO_DISSIPATED]
-        e1 = final_energy(x, v, m, c, params, info) + info[INFO_DISSIPATED]
+        if params.yield_overlap > 0.0:  # the elastic energy of a yielded contact depends on its history
+            e1 = plastic_energy(x, v, m, c, params, history) + info[INFO_DISSIPATED]
+        else:
+            e1 = final_energy(x, v, m, c, params, info) + info[INFO_DISSIPATED]
         energy_error[r] = (e1 - e0) / e0
         if st == SUCCESS:
             cnt[tid] += 1
@@ -184,6 +188,6 @@ def row_records(batch, method, run, rows):
     T, K = run.t_grid.shape[0], run.observed.shape[0]
     params = Params(*batch.params)
     return (method, Model(batch.masses[0], batch.stiffness[0], params), run._replace(t_max=float(batch.t_max[0])),
-            State(np.zeros(M), np.zeros(M)),
+            State(np.zeros(M), np.zeros(M), np.zeros(M - 1)),
             Outputs(rows.peak_v[0], rows.peak_t[0], np.zeros((T, K)), np.zeros(M - 1), np.zeros(M - 1), np.zeros(T),
                     np.zeros(INFO_SIZE), np.zeros((T, run.contacts.shape[0]))))

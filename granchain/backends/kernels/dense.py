@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from . import dp5, rkn4
-from .forces import contact_force, force_rate, law_force
+from .forces import contact_force, contact_law_force, force_rate
 from .jit import JIT_INLINE, JIT_INTERNAL, named
 from .records import KIND_RKN4
 
@@ -63,12 +63,12 @@ def dense_force(j, step, fm, Q, Qv):
     its rate of compression for a viscoelastic law) from the dense output of ``step``
     (``records.Dense``) at the time whose weights ``Q``, ``Qv`` hold (:func:`weights` already called)."""
     x, v, Kx, Kv, h = step
-    c, _, p, o, _ = fm
+    p, o = fm.params, fm.overlap
     d = o[j] + dense_compression(j, x, Kx, h, Q)
     w = 0.0
     if p.gamma > 0.0:
         w = dense_value(v[j], Kv, j, h, Qv) - dense_value(v[j + 1], Kv, j + 1, h, Qv)
-    return law_force(d, w, c[j], p)
+    return contact_law_force(j, d, w, fm)
 
 
 @njit(**JIT_INTERNAL)
@@ -77,13 +77,13 @@ def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     forces from ``fm`` (``records.Forces``; the dynamic forces of ``forces.accelerations``: each
     contact's force by its law, static overlap included, less its static force)."""
     x, v, Kx, Kv, h = step
-    c, inv_m, p, o, f0 = fm
+    c, inv_m, p, o, f0, _ = fm
     M = x.shape[0]
     weights(method, theta, Q, Qv)
     xk = dense_value(x[k], Kx, k, h, Q)
     left = 0.0
     right = 0.0
-    if p.gamma == 0.0 and p.static_force == 0.0:
+    if p.gamma == 0.0 and p.static_force == 0.0 and p.yield_overlap == 0.0:
         # The paper's chain, as before real contacts: the root searches of the peaks call this tens of
         # times per peak, and the general path's extra call and loads cost the ensembles of short
         # chains a few per cent (same-run timings against granchain 0.4.0).
@@ -95,10 +95,10 @@ def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     vk = dense_value(v[k], Kv, k, h, Qv) if p.gamma > 0.0 else 0.0  # rates only for a viscoelastic law
     if k > 0:
         w = dense_value(v[k - 1], Kv, k - 1, h, Qv) - vk if p.gamma > 0.0 else 0.0
-        left = law_force(o[k - 1] + (dense_value(x[k - 1], Kx, k - 1, h, Q) - xk), w, c[k - 1], p) - f0[k - 1]
+        left = contact_law_force(k - 1, o[k - 1] + (dense_value(x[k - 1], Kx, k - 1, h, Q) - xk), w, fm) - f0[k - 1]
     if k < M - 1:
         w = vk - dense_value(v[k + 1], Kv, k + 1, h, Qv) if p.gamma > 0.0 else 0.0
-        right = law_force(o[k] + (xk - dense_value(x[k + 1], Kx, k + 1, h, Q)), w, c[k], p) - f0[k]
+        right = contact_law_force(k, o[k] + (xk - dense_value(x[k + 1], Kx, k + 1, h, Q)), w, fm) - f0[k]
     return (left - right) * inv_m[k]
 
 
@@ -118,7 +118,7 @@ def dense_force_rate(method, theta, i, step, fm, Q, Qv):
     x, v, Kx, Kv, h = step
     dw = (dense_acceleration(method, theta, i, step, fm, Q, Qv)
           - dense_acceleration(method, theta, i + 1, step, fm, Q, Qv))
-    c, _, p, o, _ = fm
+    c, _, p, o, _, _ = fm
     d = o[i] + dense_compression(i, x, Kx, h, Q)
     w = dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
     return force_rate(d, w, dw, c[i], p)

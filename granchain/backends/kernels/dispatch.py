@@ -52,8 +52,9 @@ def verlet_chain_general(method, model, run, state, out):
 
 
 def is_general(params) -> bool:
-    """Whether a model (``records.Params``) needs the real-contact kernels: damping or a static load."""
-    return params.gamma > 0.0 or params.static_force > 0.0
+    """Whether a model (``records.Params``) needs the real-contact kernels: damping, a static load or yielding
+    contacts."""
+    return params.gamma > 0.0 or params.static_force > 0.0 or params.yield_overlap > 0.0
 
 
 def chain_kernel(kind: int, params):

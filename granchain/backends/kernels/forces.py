@@ -39,8 +39,10 @@ DAMPING_KUWABARA_KONO = 0  # gamma c delta^(n-2) d(delta)/dt
 DAMPING_VISCOUS = 1  # gamma d(delta)/dt (Rosas et al., Phys. Rev. Lett. 98, 164301 (2007))
 
 #: The force forms of the contact laws these kernels compute (``granchain.model.contacts.ContactLaw.form``)
-#: and the damping code each lowers to: what the compiled backend declares it runs.
-LAW_FORMS = {"power-law": DAMPING_KUWABARA_KONO, "kuwabara-kono": DAMPING_KUWABARA_KONO, "viscous": DAMPING_VISCOUS}
+#: and the damping code each lowers to: what the compiled backend declares it runs. Thornton's
+#: elastic-plastic contact has no damping (its ``Params.yield_overlap`` > 0 selects it: :func:`plastic_force`).
+LAW_FORMS = {"power-law": DAMPING_KUWABARA_KONO, "kuwabara-kono": DAMPING_KUWABARA_KONO, "viscous": DAMPING_VISCOUS,
+             "thornton": DAMPING_KUWABARA_KONO}
 
 
 def power_code(n: float) -> int:
@@ -98,6 +100,91 @@ def law_force(d, w, c, p):
 
 
 @njit(**JIT_INTERNAL)
+def unloading_curve(m, dy):
+    """(c_p / c, delta_p) of Thornton's unloading curve from the largest overlap ``m`` >= ``dy`` (the yield
+    overlap): f = F* / F_y = (3 m / dy - 1) / 2, c_p / c = ((2 f + 1) / 3)^(3/4) f^(-1/2) (the enlarged radius of
+    curvature R_p, C. Thornton, J. Appl. Mech. 64, 383 (1997), Eq. (20)), delta_p = m - f dy (3 / (2 f + 1))^(1/2).
+    (1, 0), Hertz's curve, for m = dy."""
+    f = 1.5 * m / dy - 0.5
+    q = (2.0 * f + 1.0) / 3.0
+    return q**0.75 / math.sqrt(f), m - f * dy / math.sqrt(q)
+
+
+@njit(**JIT_INTERNAL)
+def plastic_force(d, m, c, p):
+    """The force of Thornton's elastic-plastic contact (``granchain.model.contacts.ElasticPlastic``) at
+    compression ``d`` whose largest overlap so far is ``m`` (>= its yield overlap dy = c^2 ``p.yield_overlap``):
+    the loading line c dy^(1/2) (3 d - dy) / 2 where d >= m (Thornton's Eq. (16): a limiting contact pressure,
+    the Hertz slope at dy), else the Hertzian unloading curve c_p (d - delta_p)^(3/2) from m
+    (:func:`unloading_curve`: Hertz's c d^(3/2) for a contact that never yielded); 0 for d <= delta_p, and for
+    the zero-stiffness padding."""
+    if d <= 0.0 or c == 0.0:
+        return 0.0
+    dy = c * c * p.yield_overlap
+    if d >= m:
+        if d <= dy:
+            return c * d * math.sqrt(d)
+        return c * math.sqrt(dy) * (1.5 * d - 0.5 * dy)
+    if m <= dy:
+        return c * d * math.sqrt(d)
+    cp, dp = unloading_curve(m, dy)
+    e = d - dp
+    return c * cp * e * math.sqrt(e) if e > 0.0 else 0.0
+
+
+@njit(**JIT_INTERNAL)
+def plastic_work(m, c, p):
+    """The energy a contact of Thornton's law with largest overlap ``m`` has dissipated plastically: the work
+    along its loading curve to m less the elastic energy (2/5) F* (m - delta_p) its unloading gives back; 0
+    below yield (``ElasticPlastic.plastic_work``)."""
+    if c == 0.0:
+        return 0.0
+    dy = c * c * p.yield_overlap
+    if m <= dy:
+        return 0.0
+    u = m / dy - 1.0
+    fy_dy = c * dy * dy * math.sqrt(dy)
+    f = 1.0 + 1.5 * u
+    return fy_dy * (0.4 + u + 0.75 * u * u) - 0.4 * fy_dy * f * f * math.sqrt(3.0 / (2.0 * f + 1.0))
+
+
+@njit(**JIT)
+def plastic_energy(x, v, m, c, p, history):
+    """Kinetic energy plus the elastic energy the contacts of Thornton's law give back, (2/5) c_p (delta -
+    delta_p)^(5/2) on the unloading curve through the final compression (the largest overlaps ``history``),
+    measured from the static state as :func:`add_potential` does: the energy check of a yielding chain, with
+    :func:`plastic_work` summed apart as its dissipated energy."""
+    M = x.shape[0]
+    e = 0.0
+    for k in range(M):
+        if m[k] < math.inf:
+            e += 0.5 * m[k] * v[k] * v[k]
+    for j in range(M - 1):
+        d0, f0 = static_state(c[j], p)
+        D = x[j] - x[j + 1]
+        d = d0 + D
+        if d > 0.0:
+            dy = c[j] * c[j] * p.yield_overlap
+            mm = max(history[j], d, dy)
+            cp, dp = unloading_curve(mm, dy)
+            g = d - dp
+            if g > 0.0:
+                e += 0.4 * c[j] * cp * g * g * math.sqrt(g)
+        e -= 0.4 * c[j] * d0 * d0 * math.sqrt(d0) + f0 * D
+    return e
+
+
+@njit(**JIT_INTERNAL)
+def contact_law_force(j, d, w, fm):
+    """The force of contact j (compression ``d``, rate ``w``) by the chain's law, reading the contact's
+    history from ``fm`` (``records.Forces``) for Thornton's law: :func:`plastic_force`, else :func:`law_force`."""
+    p = fm.params
+    if p.yield_overlap > 0.0:
+        return plastic_force(d, fm.history[j], fm.stiffness[j], p)
+    return law_force(d, w, fm.stiffness[j], p)
+
+
+@njit(**JIT_INTERNAL)
 def force_rate(d, w, dw, c, p):
     """d/dt of :func:`law_force` for compression ``d``, rate ``w`` and its derivative ``dw`` (the
     relative acceleration): where it falls from + to - the contact force peaks. For the elastic law
@@ -149,13 +236,13 @@ def accelerations(x, v, fm, hi, F, a, general):
     for every k, the chain's ends included, in one loop that vectorises. The dynamic force 0 at an end
     is a free end, or an end held by the constant static force F0 of a precompressed chain (the
     external load balances f0 there; ``granchain.model.contacts.Precompression``)."""
-    c, inv_m, p, o, f0 = fm
+    c, inv_m, p, o, f0, hm = fm
     M = x.shape[0]
     nc = min(hi, M - 1)  # contacts 0..nc-1; contact hi-1 touches the resting granule hi
     F[0] = 0.0
     F[hi] = 0.0  # overwritten below by contact hi - 1 unless hi = M
     dissipated = 0.0
-    if not general or (p.gamma == 0.0 and p.static_force == 0.0):  # the paper's chain
+    if not general or (p.gamma == 0.0 and p.static_force == 0.0 and p.yield_overlap == 0.0):  # the paper's chain
         if p.power == POW_HERTZ:  # branch-free so that the loop vectorises (SIMD sqrt)
             for j in range(nc):
                 d = max(x[j] - x[j + 1], 0.0)
@@ -163,6 +250,9 @@ def accelerations(x, v, fm, hi, F, a, general):
         else:
             for j in range(nc):
                 F[j + 1] = contact_force(x[j] - x[j + 1], c[j], p)
+    elif p.yield_overlap > 0.0:  # Thornton's elastic-plastic contacts, each with its largest overlap hm[j]
+        for j in range(nc):
+            F[j + 1] = plastic_force(o[j] + (x[j] - x[j + 1]), hm[j], c[j], p) - f0[j]
     elif p.gamma == 0.0:  # precompressed, elastic
         for j in range(nc):
             F[j + 1] = contact_force(o[j] + (x[j] - x[j + 1]), c[j], p) - f0[j]

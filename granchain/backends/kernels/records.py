@@ -26,7 +26,10 @@ from collections import namedtuple
 #: ``clamp``: whether the viscoelastic force is clamped at 0 (never pulls; the default) or may pull, as in
 #: the published law (``Viscoelastic(clamp=False)``; read only where ``gamma`` > 0). ``damping``: the
 #: form of the damping term (``forces.LAW_FORMS``, from the law's ``form``; read only where ``gamma`` > 0).
-Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force", "clamp", "damping"], defaults=(True, 0))
+#: ``yield_overlap``: Thornton's elastic-plastic contact (``granchain.model.contacts.ElasticPlastic``), the yield
+#: overlap of the reference pair (contact j yields at c_j^2 times it; 0: no yield, every other law).
+Params = namedtuple("Params", ["n", "power", "wall", "gamma", "static_force", "clamp", "damping", "yield_overlap"],
+                    defaults=(True, 0, 0.0))
 
 #: One chain as the kernels see it (Eq. motion_rescaled). ``masses`` (M,), the last ``inf`` for a
 #: fixed wall; ``stiffness`` (M-1,), the prefactors c_k; ``params`` its :data:`Params`.
@@ -58,8 +61,10 @@ Steps = namedtuple("Steps", ["rtol", "atol", "first_step", "fixed_step", "relaxe
 Run = namedtuple("Run", ["observed", "t_grid", "t_max", "stop_at_exit", "exit_margin", "max_steps", "peak_rtol",
                          "contacts", "pulse_end"])
 
-#: The state (x, v) of the M granules: the initial state on entry, the final one on return.
-State = namedtuple("State", ["x", "v"])
+#: The state (x, v) of the M granules and the per-contact ``history`` (M-1,) of a law with memory (each
+#: contact's largest overlap for Thornton's law; empty for every other law): the initial state on entry,
+#: the final one on return.
+State = namedtuple("State", ["x", "v", "history"])
 
 #: What one integration records: per observed granule its peak velocity and time (K,), its
 #: velocities on the grid ``grid_v`` (T, K, time-major); per contact its peak force and time (M-1,);
@@ -89,8 +94,9 @@ Partials = namedtuple("Partials", ["sum_v", "sum_v2", "sum_wall", "n_valid", "su
 #: What a force evaluation reads, as views from the window's first granule on: the contact
 #: prefactors, the inverse masses (0 for a wall and for padding), the model's :data:`Params`, and for
 #: a precompressed chain each contact's static overlap delta0_k and static force f0_k
-#: (``forces.static_state``; zeros without precompression).
-Forces = namedtuple("Forces", ["stiffness", "inv_mass", "params", "overlap", "preload"])
+#: (``forces.static_state``; zeros without precompression), and each contact's ``history`` (its largest
+#: overlap, for Thornton's law; read only where ``params.yield_overlap`` > 0).
+Forces = namedtuple("Forces", ["stiffness", "inv_mass", "params", "overlap", "preload", "history"])
 
 # Slots of the ``info`` array every single-chain kernel fills.
 INFO_T_END = 0  # time the run stopped

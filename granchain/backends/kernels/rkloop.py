@@ -28,7 +28,16 @@ from .dense import (
     hermite_max_estimate,
     weights,
 )
-from .forces import accelerations_once, add_potential, contact_force, force_rate, static_state
+from .forces import (
+    accelerations_once,
+    add_potential,
+    contact_force,
+    force_rate,
+    plastic_force,
+    plastic_work,
+    static_state,
+    unloading_curve,
+)
 from .jit import JIT, JIT_INLINE, JIT_INTERNAL, named
 from .memory import borrowed, keep_alive
 from .peaks import (
@@ -69,6 +78,12 @@ EXPONENT_ALL_ONES = 0x7FF0_0000_0000_0000
 #: (``window.WINDOW_MARGIN``) or padding past the chain's end (zero stiffness, zero inverse mass):
 #: every stage gives them exact zeros, so the results are bitwise those of the unpadded loops.
 LANES = 8
+#: Thornton's elastic-plastic contacts (``forces.plastic_force``): an accepted step in which a contact on its
+#: loading branch turns back (its compression peaks beyond its history by more than HISTORY_RTOL of its yield
+#: overlap) is retaken to end at the turn, unless the turn lies in the step's last TURN_SLACK: the stages past
+#: the turn follow the loading line where the contact unloads.
+HISTORY_RTOL = 1e-10
+TURN_SLACK = 1e-6
 
 
 @njit(**JIT_INLINE)
@@ -122,12 +137,14 @@ def padded_arrays(model, state):
     stiffness and zero inverse mass, which stay exactly at rest; the static overlaps and forces of a
     precompressed chain; the zeroed scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``,
     ``vs`` (Mp); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); the stages'
-    dissipated power ``Pd`` (7); error ratios ``ratio`` (2 Mp); ``peak_d``, ``t_frozen`` (M)).
+    dissipated power ``Pd`` (7); error ratios ``ratio`` (2 Mp); ``peak_d``, ``t_frozen`` (M)); and each
+    contact's history ``hist`` (Mp; Thornton's law: its largest overlap, at least its yield overlap, from
+    ``state.history``; zeros for every other law).
 
     A function of its own, called by the kernel: allocated in the kernel's own code, where LLVM sees
     the arrays' sizes, the step loop ran 3-7 % slower on N = 101 decorated chains (DP5 and RKN4,
     same-run timings)."""
-    x0, v0 = state
+    x0, v0, h0 = state
     m0, c0, p = model.masses, model.stiffness, model.params
     M = m0.shape[0]
     Mp = M + LANES
@@ -146,6 +163,10 @@ def padded_arrays(model, state):
     if p.static_force > 0.0:
         for j in range(M - 1):
             opp[j], f0pp[j] = static_state(c0[j], p)
+    histp = np.zeros(Mp)
+    if p.yield_overlap > 0.0:
+        for j in range(M - 1):
+            histp[j] = max(h0[j], c0[j] * c0[j] * p.yield_overlap)
     Kxp = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
     Kvp = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
     xsp = np.zeros(Mp)
@@ -157,7 +178,7 @@ def padded_arrays(model, state):
     ratiop = np.zeros(2 * Mp)
     peak_dp = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
     t_frozenp = np.zeros(M)  # time each granule left the trailing window
-    return xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp, t_frozenp
+    return xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp, t_frozenp, histp
 
 
 def rk_kernel(method, general):
@@ -218,11 +239,11 @@ def rk_kernel(method, general):
         """
         # The steps' controls (``record``: ``records.Method``, its ``params`` laid out by ``unpack_steps``).
         steps = unpack_steps(record.params)
-        x0, v0 = state  # the initial state; receives the final one
+        x0, v0, h0 = state  # the initial state; receives the final one
         m0, p = model.masses, model.params
         M = m0.shape[0]
         (xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp,
-         t_frozenp) = padded_arrays(model, state)
+         t_frozenp, histp) = padded_arrays(model, state)
         # The step loop works on borrowed views (see memory.borrowed: no reference counting in the loop's
         # calls): the arguments are held by our caller, the arrays allocated here by the keep_alive call
         # after the loop.
@@ -230,7 +251,7 @@ def rk_kernel(method, general):
         x, v = borrowed(xp), borrowed(vp)
         inv_m, Kx, Kv, xs, vs, F = borrowed(inv_mp), borrowed(Kxp), borrowed(Kvp), borrowed(xsp), borrowed(vsp), borrowed(Fp)
         Q, Qv, ratio, peak_d, t_frozen = borrowed(Qp), borrowed(Qvp), borrowed(ratiop), borrowed(peak_dp), borrowed(t_frozenp)
-        op, f0p, Pd = borrowed(opp), borrowed(f0pp), borrowed(Pdp)
+        op, f0p, Pd, hist = borrowed(opp), borrowed(f0pp), borrowed(Pdp), borrowed(histp)
         model = Model(m, c, p)
         run = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin, run.max_steps,
                   run.peak_rtol, borrowed(run.contacts), borrowed(run.pulse_end))
@@ -252,12 +273,15 @@ def rk_kernel(method, general):
         alpha = ALPHA_RKN4 if method == KIND_RKN4 else ALPHA  # PI controller exponent of the error estimate
         goal = relax_lag > 0 or window_lag > 0
         damped = general and p.gamma > 0.0
+        # Thornton's contacts: each one's largest overlap (hist) is state, moved after every accepted step, and
+        # a step is retaken to end where a contact turns from loading to unloading (see HISTORY_RTOL)
+        plastic = general and p.yield_overlap > 0.0
         ahead = margin(p)
         # Counters passed to compiled functions start as int64, not as the literal 0 or 1: Numba would
         # compile those functions twice, once for the literal it meets first while inferring types.
         lo = np.int64(0)
         hi = initial_window(x[:M], v[:M], ahead)
-        Pd[0] = accelerations_once(x, v, Forces(c, inv_m, p, op, f0p), hi, F, Kv[0], general)
+        Pd[0] = accelerations_once(x, v, Forces(c, inv_m, p, op, f0p, hist), hi, F, Kv[0], general)
         for i in range(hi):
             Kx[0, i] = v[i]
         n_eval = np.int64(1)
@@ -303,7 +327,8 @@ def rk_kernel(method, general):
             VE = VS if method == KIND_RKN4 else Kx[6]
             XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
             OP = op[lo:]
-            FM = Forces(C, IM, p, OP, f0p[lo:])
+            H = hist[lo:]
+            FM = Forces(C, IM, p, OP, f0p[lo:], H)
             while status < 0:
                 if n_acc + n_rej >= run.max_steps:
                     status = MAX_STEPS
@@ -341,6 +366,24 @@ def rk_kernel(method, general):
                     if h < 1e-14 * max(1.0, t):
                         status = STEP_UNDERFLOW
                     continue
+                if plastic:
+                    # A contact that turns from loading to unloading inside the step: its stages past the turn
+                    # used the loading line. The step is retaken to end at the first such turn (located on this
+                    # step's dense output, exact up to the turn: the loading line continues smoothly past it).
+                    turn = 1.0
+                    for j in range(hw - 1):
+                        w0 = Kx[0, j] - Kx[0, j + 1]
+                        w1 = VE[j] - VE[j + 1]
+                        if falls(w0, w1):
+                            theta = first_root(method, ROOT_APPROACH, j, (w0, w1), Dense(X, V, Kx, Kv, h), FM, Q, QV)
+                            weights(method, theta, Q, QV)
+                            top = OP[j] + dense_compression(j, X, Kx, h, Q)
+                            if top > H[j] + HISTORY_RTOL * C[j] * C[j] * p.yield_overlap and theta < turn:
+                                turn = theta
+                    if turn < 1.0 - TURN_SLACK:
+                        n_rej += 1
+                        h *= turn
+                        continue
 
                 # Accepted: peaks and grid samples from the dense output over [t, t + h]. RKN4 lays its
                 # dense output into the stage arrays only when a step needs it (a root or a grid sample;
@@ -405,7 +448,10 @@ def rk_kernel(method, general):
                         theta = first_root(method, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
                         weights(method, theta, Q, QV)
                         dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
-                        fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
+                        if plastic:  # Thornton's force: the history moved by this step is not yet in H
+                            fp = plastic_force(dp, H[j], C[j], p)
+                        else:
+                            fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
                         if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
                             peak_f[lo + j] = fp
                             peak_ft[lo + j] = t + theta * h
@@ -435,6 +481,9 @@ def rk_kernel(method, general):
                     V[i] = VS[i]
                     Kx[0, i] = VE[i]
                     Kv[0, i] = Kv[6, i]
+                if plastic:  # the loading branch moves each contact's history
+                    for j in range(hw - 1):
+                        H[j] = max(H[j], OP[j] + (X[j] - X[j + 1]))
                 if damped:
                     dissipated += dp5.dissipated(Pd, h)
                     Pd[0] = Pd[6]
@@ -487,14 +536,19 @@ def rk_kernel(method, general):
                                 q_lo += 1
                             cut = True
                             if damped:  # the power of the contacts still integrated (the next step's first stage)
-                                Pd[0] = accelerations_once(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:]),
-                                                      hi - lo, F, Kv[0], general)
+                                Pd[0] = accelerations_once(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:],
+                                                                                  hist[lo:]), hi - lo, F, Kv[0], general)
                                 n_eval += 1
                     if relax_lag > 0 and front >= relax_lag:
                         relaxed = max(0, obs[front - relax_lag] - lo)
 
                 if cut:  # XM, VM, MM still start at the old window start
                     status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], p.wall, hi - lo, t, run, exit_since, t_needed)
+                elif plastic:  # a yielded last contact opens at its plastic overlap (the dent it keeps)
+                    gap = 0.0
+                    if hist[M - 2] > c[M - 2] * c[M - 2] * p.yield_overlap:
+                        gap = unloading_curve(hist[M - 2], c[M - 2] * c[M - 2] * p.yield_overlap)[1] - op[M - 2]
+                    status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed, gap)
                 else:
                     status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed)
                 if status >= 0:
@@ -509,11 +563,22 @@ def rk_kernel(method, general):
                     break
         X, V, C = x[lo:M], v[lo:M], c[lo:M - 1]  # the chain without padding (a cut in the last step left the views behind)
         final_peaks(obs, lo, V, Kv[0], t, peak_rtol, peak_v, peak_t)
-        final_force_peaks(X, V, C, p, lo, t, peak_rtol, peak_f, peak_ft)
+        if plastic:  # as final_force_peaks, by Thornton's force and each contact's history
+            for j in range(X.shape[0] - 1):
+                if V[j] - V[j + 1] > 0.0:
+                    f = plastic_force(op[lo + j] + (X[j] - X[j + 1]), hist[lo + j], C[j], p)
+                    if f > 0.0 and is_new_peak(f, peak_f[lo + j], peak_rtol):
+                        peak_f[lo + j] = f
+                        peak_ft[lo + j] = t
+            for j in range(M - 1):  # the plastic work, a function of the history; the final history returned
+                dissipated += plastic_work(hist[j], c[j], p)
+                h0[j] = hist[j]
+        else:
+            final_force_peaks(X, V, C, p, lo, t, peak_rtol, peak_f, peak_ft)
         for k in range(lo):  # the granules behind the window continued ballistically
             x[k] += v[k] * (t - t_frozen[k])
         write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential, dissipated)
-        keep_alive(xp, vp, cp, inv_mp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, ratiop, peak_dp, t_frozenp, opp, f0pp, Pdp)
+        keep_alive(xp, vp, cp, inv_mp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, ratiop, peak_dp, t_frozenp, opp, f0pp, Pdp, histp)
         for i in range(M):
             x0[i] = xp[i]
             v0[i] = vp[i]

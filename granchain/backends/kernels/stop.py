@@ -17,7 +17,7 @@ RATTLER_MASS_RATIO = 0.1
 
 
 @njit(**JIT_INLINE)
-def pulse_has_left(x, v, m):
+def pulse_has_left(x, v, m, gap=0.0):
     """The pulse has left the chain through its last granule.
 
     Conditions: the last contact is open, the last granule moves away from its
@@ -28,9 +28,12 @@ def pulse_has_left(x, v, m):
     pulse behind it is faster, so the integration goes on. Light granules
     rattling between heavy ones behind the pulse are not the pulse and do not
     hold the run.
+
+    ``gap``: the compression at or below which the last contact is open, 0 but for a contact that has
+    yielded (Thornton's law: its plastic overlap, the dent it keeps; ``forces.unloading_curve``).
     """
     M = x.shape[0]
-    if x[M - 2] - x[M - 1] > 0.0:
+    if x[M - 2] - x[M - 1] > gap:
         return False
     vl = v[M - 1]
     if vl <= 0.0 or v[M - 2] >= vl:
@@ -43,33 +46,33 @@ def pulse_has_left(x, v, m):
 
 
 @njit(**JIT_INLINE)
-def wall_released(x, v):
+def wall_released(x, v, gap=0.0):
     """The pulse has come back from the wall: the wall contact is open and the granule
     next to the wall moves away from it (v < 0). The run ends ``exit_margin`` after this
     has held without a break (it resets if the granule is pushed back), so "for good"
     means: for at least exit_margin."""
     M = x.shape[0]
-    return x[M - 2] - x[M - 1] <= 0.0 and v[M - 2] < 0.0
+    return x[M - 2] - x[M - 1] <= gap and v[M - 2] < 0.0
 
 
 @njit(**JIT_INLINE)
-def pulse_is_out(x, v, m, wall):
+def pulse_is_out(x, v, m, wall, gap=0.0):
     """The stop condition: :func:`wall_released` with a wall, else :func:`pulse_has_left`."""
     if wall:
-        return wall_released(x, v)
-    return pulse_has_left(x, v, m)
+        return wall_released(x, v, gap)
+    return pulse_has_left(x, v, m, gap)
 
 
 @njit(**JIT_INLINE)
-def end_of_step(x, v, m, wall, hi, t, run, exit_since, t_needed):
+def end_of_step(x, v, m, wall, hi, t, run, exit_since, t_needed, gap=0.0):
     """Bookkeeping after an accepted step: (status, or -1 to go on; updated exit_since).
 
     ``exit_since`` is the time since which the pulse has been out of the chain, or
     back from the wall (-1 while it is not); the run succeeds ``run.exit_margin`` later
-    (not before t_needed).
+    (not before t_needed). ``gap``: see :func:`pulse_has_left`.
     """
     if run.stop_at_exit:
-        if hi == x.shape[0] and pulse_is_out(x, v, m, wall):
+        if hi == x.shape[0] and pulse_is_out(x, v, m, wall, gap):
             if exit_since < 0.0:
                 exit_since = t
             if t >= max(exit_since + run.exit_margin, t_needed):

@@ -67,7 +67,7 @@ def verlet_integrate(general, h, model, run, state, out):
     class a run-time value, the paper's chain paid ~45 ns per step of 51 granules (~25 %) for code it
     never runs (same-process timing, ``benchmarks/bench_verlet.py``)."""
     m, c, p = model.masses, model.stiffness, model.params
-    x_end, v_end = state
+    x_end, v_end, _ = state  # (no per-contact history: Verlet refuses the laws with memory, as not conservative)
     x, v = x_end, v_end
     obs, t_grid, peak_rtol = run.observed, run.t_grid, run.peak_rtol
     peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
@@ -80,7 +80,7 @@ def verlet_integrate(general, h, model, run, state, out):
     if p.static_force > 0.0:
         for j in range(M - 1):
             o[j], f0[j] = static_state(c[j], p)
-    fm = Forces(c, inv_m, p, o, f0)
+    fm = Forces(c, inv_m, p, o, f0, o)
     a = np.zeros(M)
     a_new = np.zeros(M)
     v_old = v.copy()  # the other pair of buffers (see the step loop)
