@@ -50,7 +50,7 @@ def final_energy_momentum(chain, x, v, info, history=None) -> tuple[float, float
     (``kernels.forces.final_energy``, ``total_momentum``) whichever backend ran: ``simulate``'s
     ``energy_error`` and ``momentum_error`` come from here. For a law with memory (``ContactLaw.history``)
     the contacts' elastic energy depends on ``history``, their final per-contact state: the law's own
-    ``stored_energy`` (measured from the static state, as :func:`kernels.forces.add_potential` does)."""
+    ``stored_energy`` (measured from the static state, as ``kernels.forces.add_potential`` does)."""
     from .kernels.forces import final_energy, total_momentum
     from .kernels.records import INFO_DISSIPATED
     from .numba_backend import kernel_array, model_params

@@ -182,6 +182,11 @@ class BatchEvaluator:
                                  f"{space.n:g}: give the same n")
             if isinstance(contact, PowerLaw):
                 contact = None  # the default, recorded as such
+            mats = getattr(space, "materials", None)
+            if contact is not None and contact.history and mats and len(set(mats)) > 1:
+                raise ValueError("the elastic-plastic contact takes each contact's yield overlap from its prefactor, which "
+                                 "holds for granules of one material: give this design space one material (or an "
+                                 "elastic or viscous law for two)")
         self.contact = contact
         self.objective = get_objective(objective)
         self.objective.check(space.wall)
