@@ -72,19 +72,16 @@ def test_compiled_force_is_the_laws_force():
     from numba import njit
 
     from granchain.backends.kernels.forces import plastic_force as internal
-    from granchain.backends.numba_backend import model_params
 
-    plastic_force = njit(lambda d, m, c, p: internal(d, m, c, p))  # (the kernels' helper has no Python wrapper)
-
-    chain = gc.Chain(np.array([1.0, 1.0]), np.array([1.0]), 2.5, 1.0, contact=LAW)
-    p = model_params(chain)
+    plastic_force = njit(lambda d, m, c, dy: internal(d, m, c, dy))  # (the kernels' helper has no Python wrapper)
     rng = np.random.default_rng(3)
     for _ in range(200):
         c = rng.uniform(0.3, 2.0)
-        dy = float(LAW.yield_overlaps(c))
+        dy = float(LAW.yield_overlaps(c)) * rng.uniform(0.5, 2.0)  # (any yield overlap: several materials)
         m = dy * rng.choice([1.0, rng.uniform(1.0, 30.0)])
         d = rng.uniform(-0.1, 1.5) * m
-        assert plastic_force(d, m, c, p) == pytest.approx(float(LAW.force(d, c, history=m)), rel=1e-13, abs=1e-300)
+        expected = float(LAW.force(d, c, history=m, yield_overlap=dy))
+        assert plastic_force(d, m, c, dy) == pytest.approx(expected, rel=1e-13, abs=1e-300)
 
 
 RATIOS = [1.1, 1.5, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0]
@@ -295,16 +292,44 @@ def test_error_control_keeps_the_contract_across_the_kinks():
     assert errors[True, 1e-8] < 10 * errors[False, 1e-8]
 
 
-def test_several_materials_are_refused_not_run_wrong():
-    """Each contact's yield overlap is c_k^2 delta_y,ref only for one material: a chain of several materials,
-    and a two-material design space, are refused with the reason (not integrated with wrong yield overlaps);
-    one material given explicitly is accepted."""
+def test_several_materials_yield_at_their_own_pressure():
+    """A chain of steel and brass beads against a rigid wall: each contact's yield overlap equals
+    R* (pi p / (2 E*))^2 in SI units (p the softer material's limiting pressure, E* the pair's modulus),
+    computed here with Hertz's formulas and divided by the length unit of the chain's rescaling; kernels and
+    reference agree on the run, and the energy balances. A material without a yield stress is refused with the
+    reason; so is a two-material design space (its batches carry no materials)."""
     from granchain import design
 
-    law = ElasticPlastic(0.2)
-    with pytest.raises(ValueError, match="one material"):
+    steel = dataclasses.replace(gc.units.STEEL, yield_stress="1.5 GPa")
+    brass = dataclasses.replace(gc.units.BRASS, yield_stress="0.4 GPa")
+    radius, speed = 2.5e-3, 2.0
+    law = ElasticPlastic.from_material(steel, speed)
+    radii = np.array([1.0, 0.8, 1.0, 0.6, 1.2, 1.0])
+    mats = [steel, brass, steel, brass, brass, steel]
+    chain = gc.from_radii(radii, materials=mats).with_wall(material="rigid").replace(contact=law)
+    unit = gc.units.scale(steel, radius, speed).length
+    expected = []
+    for k in range(len(radii)):
+        a = mats[k]
+        if k + 1 < len(radii):
+            b = mats[k + 1]
+            r_star = radius * radii[k] * radii[k + 1] / (radii[k] + radii[k + 1])
+            e_star = 1.0 / ((1 - a.nu**2) / a.E + (1 - b.nu**2) / b.E)
+            p = 1.6 * min(a.yield_stress, b.yield_stress)
+        else:  # the rigid wall: R* = R, E* = E / (1 - nu^2), only the sphere yields
+            r_star, e_star, p = radius * radii[k], a.E / (1 - a.nu**2), 1.6 * a.yield_stress
+        expected.append(r_star * (math.pi * p / (2 * e_star)) ** 2 / unit)
+    np.testing.assert_allclose(chain.yield_overlaps(), expected, rtol=1e-10)
+    res = gc.simulate(chain, gc.DP5(rtol=1e-11, atol=1e-13))
+    ref = gc.simulate(chain, gc.DOP853(rtol=1e-11, atol=1e-13))
+    assert res.ok and ref.ok and res.dissipated_energy > 0.1 * chain.energy
+    assert abs(res.energy_error) < 1e-8 and abs(ref.energy_error) < 1e-8
+    np.testing.assert_allclose(res.peak_velocity, ref.peak_velocity, rtol=1e-6)
+    assert res.dissipated_energy == pytest.approx(ref.dissipated_energy, rel=1e-6)
+    # one material given as materials= is the one-material chain, bit for bit
+    one = gc.from_radii(radii, materials=steel).replace(contact=law)
+    np.testing.assert_array_equal(one.yield_overlaps(), law.yield_overlaps(one.stiffness))
+    with pytest.raises(ValueError, match="yield stress"):
         gc.from_radii(np.ones(4), materials=["steel", "ptfe", "steel", "steel"]).replace(contact=law)
-    chain = gc.from_radii(np.ones(4), materials="steel").replace(contact=law)
-    assert gc.simulate(chain).ok
     with pytest.raises(ValueError, match="one material"):
         design.BatchEvaluator(design.BinarySpace(6, (1.0, 1.0), materials=("steel", "ptfe")), "wall-force", contact=law)

@@ -61,10 +61,10 @@ def final_energy_momentum(chain, x, v, info, history=None) -> tuple[float, float
     if chain.contact.history:
         from ..model.contacts import Precompression
 
-        law, moving = chain.contact, np.isfinite(masses)
+        law, moving, dy = chain.contact, np.isfinite(masses), chain.yield_overlaps()
         d0 = Precompression(chain.static_force).overlaps(stiffness, chain.n)
         D = x[:-1] - x[1:]
-        stored = (law.stored_energy(d0 + D, stiffness, history) - law.stored_energy(d0, stiffness)
+        stored = (law.stored_energy(d0 + D, stiffness, history, dy) - law.stored_energy(d0, stiffness, None, dy)
                   - law.elastic_force(d0, stiffness) * D)
         e1 = 0.5 * float(np.sum(masses[moving] * v[moving] ** 2)) + float(np.sum(stored)) + dissipated
     else:
@@ -282,11 +282,11 @@ class Backend:
 
 def history_state(chain) -> dict:
     """The per-contact state a run of ``chain`` carries besides (x, v), as ``Backend.integrate``'s keywords:
-    ``{"history": the contacts' largest overlaps}`` for a law with memory (virgin: its yield overlaps), else
-    nothing."""
+    ``{"history": the contacts' largest overlaps}`` for a law with memory, on entry those of virgin contacts
+    (their yield overlaps, :meth:`granchain.Chain.yield_overlaps`), else nothing."""
     if not chain.contact.history:
         return {}
-    return {"history": np.array(chain.contact.yield_overlaps(chain.stiffness), dtype=float)}
+    return {"history": np.array(chain.yield_overlaps(), dtype=float)}
 
 
 def batch_chain(masses, stiffness, n, initial_velocity, observed, model: dict | None = None):

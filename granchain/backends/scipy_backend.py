@@ -31,7 +31,8 @@ from .kernels.records import INFO_SIZE
 from .kernels.stop import RATTLER_MASS_RATIO
 
 
-def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, static_force: float = 0.0, history=None):
+def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, static_force: float = 0.0, history=None,
+              yield_overlap=None):
     """f(t, y) for y = (x, v) (and, for a viscoelastic law, the dissipated energy as a last component),
     Eq. (motion_rescaled), vectorised with NumPy; returns (rhs, forces) with forces(x, v) the contacts'
     total forces (static load included).
@@ -41,7 +42,7 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
     static state, each contact has the overlap delta0 = (F0 / c)^(1/(n-1)) and the accelerations come
     from the forces less their static values (the external load balances them at the ends). ``history``: for
     a law with memory (``law.history``), each contact's largest overlap so far, read at every call (the caller
-    moves it between steps)."""
+    moves it between steps), and ``yield_overlap`` each contact's yield overlap (None: one material)."""
     M = masses.size
     law = PowerLaw(n) if law is None else law
     damped = law.dissipates and not law.history  # a rate-dependent law: its dissipated energy is integrated
@@ -52,7 +53,7 @@ def chain_rhs(masses: np.ndarray, stiffness: np.ndarray, n: float, law=None, sta
     def forces(x, v=None):
         d = d0 + (x[:-1] - x[1:])
         if law.history:
-            return law.force(d, stiffness, history=history)
+            return law.force(d, stiffness, history=history, yield_overlap=yield_overlap)
         if damped:
             return law.force(d, stiffness, v[:-1] - v[1:])
         return law.force(d, stiffness)
@@ -144,17 +145,17 @@ def _history_event(dense, y_old, y, t0, t1, history, d0, tol, M):
 def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, stop_at_exit, exit_margin, max_steps, peak_rtol,
                      t_grid, law=None, static_force=0.0, sensed=(), history=None):
     """Same contract as the compiled kernels; returns (status, info, peak_v, peak_t, grid_v, x, v, peak_f, peak_ft,
-    grid_f, grid_c). ``history`` (M-1,): a law with memory's per-contact state, the initial one on entry (None:
-    virgin contacts) and the final one on return."""
+    grid_f, grid_c). ``history`` (M-1,): a law with memory's per-contact state: on entry the virgin contacts'
+    yield overlaps (``kernels.records.State``; None: granules of one material), the largest overlaps on return."""
     M = masses.size
     law = PowerLaw(n) if law is None else law
-    hist = None
+    hist = dy = None
     if law.history:
-        hist = law.yield_overlaps(stiffness).astype(float)  # a virgin contact: Hertz up to its yield overlap
-        if history is not None:
-            hist = np.maximum(hist, history)
-        tol = 1e-10 * hist
-    rhs, law_forces = chain_rhs(masses, stiffness, n, law, static_force, history=hist)
+        # a virgin contact: Hertz up to its yield overlap, where its history starts
+        dy = law.yield_overlaps(stiffness) if history is None else np.array(history, dtype=float)
+        hist = dy.copy()
+        tol = 1e-10 * dy
+    rhs, law_forces = chain_rhs(masses, stiffness, n, law, static_force, history=hist, yield_overlap=dy)
     damped = law.dissipates and not law.history
     sensed = np.asarray(sensed, dtype=np.int64)
     wall = bool(np.isinf(masses[-1]))
@@ -240,7 +241,7 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
                 z = dense(tp)
                 d = d0[j] + z[j] - z[j + 1]
                 if hist is not None:
-                    fp = float(law.force(d, stiffness[j], history=hist[j]))
+                    fp = float(law.force(d, stiffness[j], history=hist[j], yield_overlap=dy[j]))
                 else:
                     fp = stiffness[j] * d ** (n - 1.0) if d > 0.0 else 0.0
                 if fp > 0.0 and fp > peak_f[j] + peak_rtol * abs(peak_f[j]):
@@ -266,7 +267,7 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
         if stop_at_exit:
             gap = 0.0
             if hist is not None:  # a yielded last contact opens at its plastic overlap (the dent it keeps)
-                gap = float(law.plastic_overlap(hist[-1], stiffness[-1])) - d0[-1]
+                gap = float(law.plastic_overlap(hist[-1], stiffness[-1], dy[-1])) - d0[-1]
             if _pulse_has_left(y[:M], y[M:2 * M], masses, gap):
                 if exit_since < 0.0:
                     exit_since = t1
@@ -294,7 +295,7 @@ def dop853_integrate(masses, stiffness, n, obs, x0, v0, *, rtol, atol, t_max, st
     info = np.zeros(INFO_SIZE)
     dissipated = float(solver.y[2 * M]) if damped else 0.0
     if hist is not None:  # the plastic work, a function of each contact's history
-        dissipated = float(np.sum(law.plastic_work(hist, stiffness)))
+        dissipated = float(np.sum(law.plastic_work(hist, stiffness, dy)))
         if history is not None:
             history[:] = hist
     write_info(info, solver.t, n_steps, 0, exit_since, evaluations + solver.nfev, 0, 0.0, dissipated)  # no rejections counted, no window

@@ -164,8 +164,6 @@ class Chain:
                 f"{v0:g} moves its contact by ~{ratio:.1e} of the static overlap, which double precision (2.2e-16) does "
                 f"not resolve to the accuracy of the peaks; the dynamic part must be >= {MIN_DYNAMIC_RATIO:g} of it, "
                 f"so give F0 <= {_largest_static_force(float(m[0]), float(c[0]), n, v0):.3g} (or strike harder)")
-        if contact.history:
-            _check_yielding(contact, c, load, self.meta)
         if self.observed is None:
             obs = np.arange(int(striker), m.size - wall, dtype=np.int64)
         else:
@@ -183,6 +181,8 @@ class Chain:
         radii = None if self.radii is None else _radii_with_wall(self.radii, wall)
         if radii is not None and radii.size != m.size:
             raise ValueError(f"radii has {radii.size} entries for {m.size} granules")
+        if contact.history:
+            _check_yielding(contact, contact_yield_overlaps(contact, c, radii, self.meta), c, load)
         object.__setattr__(self, "masses", _frozen(m))
         object.__setattr__(self, "stiffness", _frozen(c))
         object.__setattr__(self, "n", n)
@@ -388,6 +388,12 @@ class Chain:
         return self.replace(masses=np.append(self.masses, np.inf), stiffness=np.append(self.stiffness, c_wall), radii=radii,
                             meta=meta)
 
+    def yield_overlaps(self):
+        """Each contact's yield overlap under the chain's law (``granchain.ElasticPlastic``): c_k^2 delta_y,ref for
+        granules of one material, else from the radii and the materials' yield stresses
+        (:meth:`granchain.model.contacts.ElasticPlastic.yield_overlaps`)."""
+        return contact_yield_overlaps(self.contact, self.stiffness, self.radii, self.meta)
+
     def with_observed(self, observed) -> "Chain":
         """The same chain observing other granules (0-based indices of the arrays; a striker is 0)."""
         return self.replace(observed=observed)
@@ -471,16 +477,18 @@ def _radii_with_wall(radii, wall: bool) -> np.ndarray:
     return positive_array("radii", radii)
 
 
-def _check_yielding(law, stiffness, load, meta) -> None:
-    """Refuse what the elastic-plastic law (``granchain.ElasticPlastic``) cannot describe here: a static load
-    that has already yielded a contact (the chain would not start in its elastic static state), and granules
-    of several materials, whose contacts' yield overlaps do not follow from their prefactors alone."""
-    if meta and meta.get("materials") and len({getattr(mt, "name", mt) for mt in meta["materials"]}) > 1:
-        raise ValueError("the elastic-plastic contact takes each contact's yield overlap from its prefactor, which holds for "
-                         "granules of one material: build the chain from one material (or use an elastic law for a "
-                         "chain of several)")
+def contact_yield_overlaps(law, stiffness, radii, meta):
+    """Each contact's yield overlap under a law that yields (``ElasticPlastic.yield_overlaps``), from the
+    prefactors, and for granules or a wall of several materials from the radii and materials too."""
+    meta = meta or {}
+    return law.yield_overlaps(stiffness, radii=radii, materials=meta.get("materials"),
+                              wall_material=meta.get("wall_material"))
+
+
+def _check_yielding(law, dy, stiffness, load) -> None:
+    """Refuse a static load that has already yielded a contact under the elastic-plastic law
+    (``granchain.ElasticPlastic``; yield overlaps ``dy``): the chain would not start in its elastic static state."""
     if load.force > 0.0:
-        dy = law.yield_overlaps(stiffness)
         d0 = load.overlaps(stiffness, 2.5)
         if np.any(d0 >= dy):
             k = int(np.argmax(d0 / dy))

@@ -351,7 +351,8 @@ class ElasticPlastic(ContactLaw):
     reference granules (radius 1, mass 1, prefactor 1) first yield: (1/2)(1/2) v_y^2 = (2/5) delta_y^(5/2).
     For spheres of one material the yield speed of a pair of equal spheres does not depend on their size,
     and each contact's yield overlap follows from its prefactor: delta_y,k = c_k^2 delta_y,ref (the limiting
-    pressure is a property of the material; :meth:`yield_overlaps`). From a material's yield stress, in SI
+    pressure is a property of the material; :meth:`yield_overlaps`, which also gives those of a chain of several
+    materials, each yielding at the softer material's pressure). From a material's yield stress, in SI
     units: :meth:`from_material`. The two-sphere coefficient of restitution has Thornton's closed form
     (:meth:`restitution`): 1 below v_y, falling as v^(-1/4) far above it.
     """
@@ -399,23 +400,60 @@ class ElasticPlastic(ContactLaw):
         """delta_y of two reference granules (reduced mass 1/2, prefactor 1): (5 v_y^2 / 8)^(2/5)."""
         return (0.625 * self.yield_speed**2) ** 0.4
 
-    def yield_overlaps(self, stiffness):
-        """Each contact's yield overlap, c_k^2 delta_y,ref (NumPy): for spheres of one material c_k =
-        sqrt(2 R*_k) (Eq. r-prime) and delta_y = R* (pi p_y / (2 E*))^2 grows as R*; a wall of the
-        granules' material (c = sqrt(2 R)) included."""
+    def yield_overlaps(self, stiffness, *, radii=None, materials=None, wall_material=None):
+        """Each contact's yield overlap (NumPy). For spheres of one material, c_k^2 delta_y,ref: c_k = sqrt(2 R*_k)
+        (Eq. r-prime) and delta_y = R* (pi p_y / (2 E*))^2 grows as R* (a wall of the granules' material,
+        c = sqrt(2 R), included). For a chain of several materials (``materials``, one per granule, the
+        reference granule 1's; ``wall_material`` a wall of its own, or ``"rigid"``) with its ``radii``:
+
+            delta_y,k = delta_y,ref (2 R*_k)^2 / c_k^2 (p_k / p_ref)^2,
+
+        since c_k = (E*_k / E*_ref) sqrt(2 R*_k) (``granchain.model.chain.material_stiffness``) and the pair's
+        limiting pressure p_k is the softer material's (it yields first), 1.60 times its yield stress
+        (``Material.limiting_pressure``); a rigid wall does not yield. Every material then needs a
+        ``yield_stress``."""
         import numpy as np
 
         c = np.asarray(stiffness, dtype=float)
-        return c * c * self.reference_yield_overlap
+        one = c * c * self.reference_yield_overlap
+        distinct = {getattr(m, "name", m) for m in (materials or ())}
+        if radii is None or (len(distinct) <= 1 and wall_material is None):
+            return one
+        r = np.asarray(radii, dtype=float)
+        a, b = r[:-1], r[1:]
+        reduced = np.where(np.isinf(b), a, a * b / (a + np.where(np.isinf(b), 0.0, b)))  # R*; a flat wall: R
+        geometric = self.reference_yield_overlap * (2.0 * reduced) ** 2 / (c * c)
+        if not materials:  # one material, a wall of another: the spheres yield (their yield stress unknown here)
+            return geometric
 
-    def _branches(self, d, c, history):
-        """(loading, c_p, delta_p, dy) for compressions ``d``: ``loading`` where d reaches the history
-        (then the force is the loading line), else the unloading curve's c_p and delta_p from the history."""
+        def pressure(m):
+            if isinstance(m, str) and m == "rigid":
+                return math.inf
+            if m.yield_stress is None:
+                raise ValueError(f"the elastic-plastic contact of a chain of several materials needs each material's "
+                                 f"yield stress: {m.name!r} has none (Material(..., yield_stress=...))")
+            return m.limiting_pressure
+
+        from ..units import get_material
+
+        mats = [get_material(m) if isinstance(m, str) else m for m in materials]
+        p = [pressure(m) for m in mats]
+        pair = [min(p[k], p[k + 1]) for k in range(len(mats) - 1)]
+        if c.size == len(mats):  # a wall after the last granule
+            wall = wall_material if wall_material is not None else mats[-1]
+            wall = get_material(wall) if isinstance(wall, str) and wall != "rigid" else wall
+            pair.append(min(p[-1], pressure(wall)))
+        return geometric * (np.asarray(pair) / p[0]) ** 2
+
+    def _branches(self, d, c, history, dy=None):
+        """(m, c_p, delta_p, dy) for compressions ``d``: the largest overlap m (the history, moved to d where d
+        reaches it: the loading line), the unloading curve's c_p and delta_p from it, and the yield overlaps ``dy``
+        (None: :meth:`yield_overlaps` of one material)."""
         import numpy as np
 
         d = np.asarray(d, dtype=float)
         c = np.asarray(c, dtype=float)
-        dy = self.yield_overlaps(c)
+        dy = self.yield_overlaps(c) if dy is None else np.asarray(dy, dtype=float)
         m = dy if history is None else np.maximum(np.asarray(history, dtype=float), dy)
         m = np.maximum(m, d)  # loading past the history moves it
         f = 1.5 * m / dy - 0.5  # F* / F_y
@@ -423,43 +461,46 @@ class ElasticPlastic(ContactLaw):
         dp = m - f * dy * np.sqrt(3.0 / (2.0 * f + 1.0))  # delta_m - (F* / c_p)^(2/3)
         return m, cp, dp, dy
 
-    def plastic_overlap(self, history, stiffness):
+    def plastic_overlap(self, history, stiffness, yield_overlap=None):
         """delta_p, the compression at which a contact whose largest overlap is ``history`` unloads to zero force
-        (the dent it keeps; 0 for a contact that never yielded). Its spheres touch, with no force, down to it."""
-        m, cp, dp, dy = self._branches(0.0, stiffness, history)
+        (the dent it keeps; 0 for a contact that never yielded). Its spheres touch, with no force, down to it.
+        ``yield_overlap``: the contacts' yield overlaps (None: one material, :meth:`yield_overlaps`)."""
+        m, cp, dp, dy = self._branches(0.0, stiffness, history, yield_overlap)
         return dp
 
-    def force(self, compression, stiffness, rate=None, history=None):
+    def force(self, compression, stiffness, rate=None, history=None, yield_overlap=None):
         """The force at compression ``compression`` (NumPy, any shape) of contacts whose largest overlap so
         far is ``history`` (None: virgin contacts): the loading line where the compression reaches the
-        history, else the unloading curve from it; Hertz's c delta^(3/2) below yield. ``rate`` is not read."""
+        history, else the unloading curve from it; Hertz's c delta^(3/2) below yield. ``rate`` is not read;
+        ``yield_overlap`` as in :meth:`plastic_overlap`."""
         import numpy as np
 
         d = np.asarray(compression, dtype=float)
-        m, cp, dp, dy = self._branches(d, stiffness, history)
+        m, cp, dp, dy = self._branches(d, stiffness, history, yield_overlap)
         e = np.maximum(d - dp, 0.0)
         return np.where(d > 0.0, cp * e * np.sqrt(e), 0.0)
 
-    def stored_energy(self, compression, stiffness, history=None):
+    def stored_energy(self, compression, stiffness, history=None, yield_overlap=None):
         """The elastic energy a contact gives back if unloaded from ``compression``: (2/5) c_p
         (delta - delta_p)^(5/2) of the unloading curve through it (Hertz's (2/5) c delta^(5/2) below yield)."""
         import numpy as np
 
         d = np.asarray(compression, dtype=float)
-        m, cp, dp, dy = self._branches(d, stiffness, history)
+        m, cp, dp, dy = self._branches(d, stiffness, history, yield_overlap)
         e = np.maximum(d - dp, 0.0)
         return np.where(d > 0.0, 0.4 * cp * e * e * np.sqrt(e), 0.0)
 
-    def plastic_work(self, history, stiffness):
+    def plastic_work(self, history, stiffness, yield_overlap=None):
         """The energy a contact whose largest overlap is ``history`` has dissipated plastically:
         W_load(delta_m) - (2/5) F* (delta_m - delta_p), 0 below yield (NumPy)."""
         import numpy as np
 
         c = np.asarray(stiffness, dtype=float)
-        dy = self.yield_overlaps(c)
+        dy = self.yield_overlaps(c) if yield_overlap is None else np.asarray(yield_overlap, dtype=float)
         m = np.maximum(np.asarray(history, dtype=float), dy)
-        u = m / dy - 1.0
-        fy_dy = c * dy * dy * np.sqrt(dy)  # F_y delta_y
+        with np.errstate(invalid="ignore"):  # a contact that cannot yield (dy = inf) does no plastic work
+            u = np.where(np.isfinite(dy), m / dy - 1.0, 0.0)
+        fy_dy = np.where(np.isfinite(dy), c * dy * dy * np.sqrt(dy), 0.0)  # F_y delta_y
         loading = fy_dy * (0.4 + u + 0.75 * u * u)  # the work along Hertz to delta_y, then the loading line
         f = 1.0 + 1.5 * u
         returned = 0.4 * fy_dy * f * f * np.sqrt(3.0 / (2.0 * f + 1.0))  # (2/5) F* (delta_m - delta_p)

@@ -77,7 +77,7 @@ def dense_acceleration(method, theta, k, step, fm, Q, Qv):
     forces from ``fm`` (``records.Forces``; the dynamic forces of ``forces.accelerations``: each
     contact's force by its law, static overlap included, less its static force)."""
     x, v, Kx, Kv, h = step
-    c, inv_m, p, o, f0, _ = fm
+    c, inv_m, p, o, f0, _, _ = fm
     M = x.shape[0]
     weights(method, theta, Q, Qv)
     xk = dense_value(x[k], Kx, k, h, Q)
@@ -118,7 +118,7 @@ def dense_force_rate(method, theta, i, step, fm, Q, Qv):
     x, v, Kx, Kv, h = step
     dw = (dense_acceleration(method, theta, i, step, fm, Q, Qv)
           - dense_acceleration(method, theta, i + 1, step, fm, Q, Qv))
-    c, _, p, o, _, _ = fm
+    c, _, p, o, _, _, _ = fm
     d = o[i] + dense_compression(i, x, Kx, h, Q)
     w = dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
     return force_rate(d, w, dw, c[i], p)

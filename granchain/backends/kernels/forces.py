@@ -111,16 +111,15 @@ def unloading_curve(m, dy):
 
 
 @njit(**JIT_INTERNAL)
-def plastic_force(d, m, c, p):
+def plastic_force(d, m, c, dy):
     """The force of Thornton's elastic-plastic contact (``granchain.model.contacts.ElasticPlastic``) at
-    compression ``d`` whose largest overlap so far is ``m`` (>= its yield overlap dy = c^2 ``p.yield_overlap``):
+    compression ``d`` whose largest overlap so far is ``m`` (>= its yield overlap ``dy``):
     the loading line c dy^(1/2) (3 d - dy) / 2 where d >= m (Thornton's Eq. (16): a limiting contact pressure,
     the Hertz slope at dy), else the Hertzian unloading curve c_p (d - delta_p)^(3/2) from m
     (:func:`unloading_curve`: Hertz's c d^(3/2) for a contact that never yielded); 0 for d <= delta_p, and for
     the zero-stiffness padding."""
     if d <= 0.0 or c == 0.0:
         return 0.0
-    dy = c * c * p.yield_overlap
     if d >= m:
         if d <= dy:
             return c * d * math.sqrt(d)
@@ -133,14 +132,11 @@ def plastic_force(d, m, c, p):
 
 
 @njit(**JIT_INTERNAL)
-def plastic_work(m, c, p):
+def plastic_work(m, c, dy):
     """The energy a contact of Thornton's law with largest overlap ``m`` has dissipated plastically: the work
     along its loading curve to m less the elastic energy (2/5) F* (m - delta_p) its unloading gives back; 0
     below yield (``ElasticPlastic.plastic_work``)."""
-    if c == 0.0:
-        return 0.0
-    dy = c * c * p.yield_overlap
-    if m <= dy:
+    if c == 0.0 or m <= dy:
         return 0.0
     u = m / dy - 1.0
     fy_dy = c * dy * dy * math.sqrt(dy)
@@ -153,7 +149,8 @@ def plastic_energy(x, v, m, c, p, history):
     """Kinetic energy plus the elastic energy the contacts of Thornton's law give back, (2/5) c_p (delta -
     delta_p)^(5/2) on the unloading curve through the final compression (the largest overlaps ``history``),
     measured from the static state as :func:`add_potential` does: the energy check of a yielding chain, with
-    :func:`plastic_work` summed apart as its dissipated energy."""
+    :func:`plastic_work` summed apart as its dissipated energy. (The ensembles' rows: granules of one material,
+    yield overlaps c^2 ``p.yield_overlap``.)"""
     M = x.shape[0]
     e = 0.0
     for k in range(M):
@@ -180,7 +177,7 @@ def contact_law_force(j, d, w, fm):
     history from ``fm`` (``records.Forces``) for Thornton's law: :func:`plastic_force`, else :func:`law_force`."""
     p = fm.params
     if p.yield_overlap > 0.0:
-        return plastic_force(d, fm.history[j], fm.stiffness[j], p)
+        return plastic_force(d, fm.history[j], fm.stiffness[j], fm.yield_overlap[j])
     return law_force(d, w, fm.stiffness[j], p)
 
 
@@ -236,7 +233,7 @@ def accelerations(x, v, fm, hi, F, a, general):
     for every k, the chain's ends included, in one loop that vectorises. The dynamic force 0 at an end
     is a free end, or an end held by the constant static force F0 of a precompressed chain (the
     external load balances f0 there; ``granchain.model.contacts.Precompression``)."""
-    c, inv_m, p, o, f0, hm = fm
+    c, inv_m, p, o, f0, hm, dy = fm
     M = x.shape[0]
     nc = min(hi, M - 1)  # contacts 0..nc-1; contact hi-1 touches the resting granule hi
     F[0] = 0.0
@@ -252,7 +249,7 @@ def accelerations(x, v, fm, hi, F, a, general):
                 F[j + 1] = contact_force(x[j] - x[j + 1], c[j], p)
     elif p.yield_overlap > 0.0:  # Thornton's elastic-plastic contacts, each with its largest overlap hm[j]
         for j in range(nc):
-            F[j + 1] = plastic_force(o[j] + (x[j] - x[j + 1]), hm[j], c[j], p) - f0[j]
+            F[j + 1] = plastic_force(o[j] + (x[j] - x[j + 1]), hm[j], c[j], dy[j]) - f0[j]
     elif p.gamma == 0.0:  # precompressed, elastic
         for j in range(nc):
             F[j + 1] = contact_force(o[j] + (x[j] - x[j + 1]), c[j], p) - f0[j]

@@ -62,8 +62,10 @@ Run = namedtuple("Run", ["observed", "t_grid", "t_max", "stop_at_exit", "exit_ma
                          "contacts", "pulse_end"])
 
 #: The state (x, v) of the M granules and the per-contact ``history`` (M-1,) of a law with memory (each
-#: contact's largest overlap for Thornton's law; empty for every other law): the initial state on entry,
-#: the final one on return.
+#: contact's largest overlap for Thornton's law, unread for every other law): the initial state on entry,
+#: the final one on return. A run starts from virgin contacts, whose largest overlap is by convention their
+#: yield overlap: on entry ``history`` holds the contacts' yield overlaps (0: c_j^2 ``Params.yield_overlap``,
+#: granules of one material), which the kernel keeps as such.
 State = namedtuple("State", ["x", "v", "history"])
 
 #: What one integration records: per observed granule its peak velocity and time (K,), its
@@ -94,9 +96,9 @@ Partials = namedtuple("Partials", ["sum_v", "sum_v2", "sum_wall", "n_valid", "su
 #: What a force evaluation reads, as views from the window's first granule on: the contact
 #: prefactors, the inverse masses (0 for a wall and for padding), the model's :data:`Params`, and for
 #: a precompressed chain each contact's static overlap delta0_k and static force f0_k
-#: (``forces.static_state``; zeros without precompression), and each contact's ``history`` (its largest
-#: overlap, for Thornton's law; read only where ``params.yield_overlap`` > 0).
-Forces = namedtuple("Forces", ["stiffness", "inv_mass", "params", "overlap", "preload", "history"])
+#: (``forces.static_state``; zeros without precompression), and for Thornton's law (read only where
+#: ``params.yield_overlap`` > 0) each contact's ``history`` (its largest overlap) and ``yield_overlap``.
+Forces = namedtuple("Forces", ["stiffness", "inv_mass", "params", "overlap", "preload", "history", "yield_overlap"])
 
 # Slots of the ``info`` array every single-chain kernel fills.
 INFO_T_END = 0  # time the run stopped

@@ -138,8 +138,8 @@ def padded_arrays(model, state):
     precompressed chain; the zeroed scratch arrays (stage derivatives ``Kx``, ``Kv`` (7, Mp); ``xs``,
     ``vs`` (Mp); contact forces ``F`` (Mp + 1); dense-output weights ``Q``, ``Qv`` (7); the stages'
     dissipated power ``Pd`` (7); error ratios ``ratio`` (2 Mp); ``peak_d``, ``t_frozen`` (M)); and each
-    contact's history ``hist`` (Mp; Thornton's law: its largest overlap, at least its yield overlap, from
-    ``state.history``; zeros for every other law).
+    contact's history ``hist`` and yield overlap ``dy`` (Mp; Thornton's law: its largest overlap, starting at
+    its yield overlap, from ``state.history``; zeros for every other law).
 
     A function of its own, called by the kernel: allocated in the kernel's own code, where LLVM sees
     the arrays' sizes, the step loop ran 3-7 % slower on N = 101 decorated chains (DP5 and RKN4,
@@ -164,9 +164,11 @@ def padded_arrays(model, state):
         for j in range(M - 1):
             opp[j], f0pp[j] = static_state(c0[j], p)
     histp = np.zeros(Mp)
-    if p.yield_overlap > 0.0:
+    dyp = np.zeros(Mp)
+    if p.yield_overlap > 0.0:  # virgin contacts: the history starts at the yield overlaps (records.State)
         for j in range(M - 1):
-            histp[j] = max(h0[j], c0[j] * c0[j] * p.yield_overlap)
+            dyp[j] = h0[j] if h0[j] > 0.0 else c0[j] * c0[j] * p.yield_overlap
+            histp[j] = dyp[j]
     Kxp = np.zeros((7, Mp))  # stage derivatives of x (= stage velocities), window-local index
     Kvp = np.zeros((7, Mp))  # stage derivatives of v (= stage accelerations), window-local index
     xsp = np.zeros(Mp)
@@ -178,7 +180,7 @@ def padded_arrays(model, state):
     ratiop = np.zeros(2 * Mp)
     peak_dp = np.zeros(M)  # compression at each contact's recorded peak force (for the screen)
     t_frozenp = np.zeros(M)  # time each granule left the trailing window
-    return xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp, t_frozenp, histp
+    return xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp, t_frozenp, histp, dyp
 
 
 def rk_kernel(method, general):
@@ -243,7 +245,7 @@ def rk_kernel(method, general):
         m0, p = model.masses, model.params
         M = m0.shape[0]
         (xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp,
-         t_frozenp, histp) = padded_arrays(model, state)
+         t_frozenp, histp, dyp) = padded_arrays(model, state)
         # The step loop works on borrowed views (see memory.borrowed: no reference counting in the loop's
         # calls): the arguments are held by our caller, the arrays allocated here by the keep_alive call
         # after the loop.
@@ -251,7 +253,7 @@ def rk_kernel(method, general):
         x, v = borrowed(xp), borrowed(vp)
         inv_m, Kx, Kv, xs, vs, F = borrowed(inv_mp), borrowed(Kxp), borrowed(Kvp), borrowed(xsp), borrowed(vsp), borrowed(Fp)
         Q, Qv, ratio, peak_d, t_frozen = borrowed(Qp), borrowed(Qvp), borrowed(ratiop), borrowed(peak_dp), borrowed(t_frozenp)
-        op, f0p, Pd, hist = borrowed(opp), borrowed(f0pp), borrowed(Pdp), borrowed(histp)
+        op, f0p, Pd, hist, dy = borrowed(opp), borrowed(f0pp), borrowed(Pdp), borrowed(histp), borrowed(dyp)
         model = Model(m, c, p)
         run = Run(borrowed(run.observed), borrowed(run.t_grid), run.t_max, run.stop_at_exit, run.exit_margin, run.max_steps,
                   run.peak_rtol, borrowed(run.contacts), borrowed(run.pulse_end))
@@ -281,7 +283,7 @@ def rk_kernel(method, general):
         # compile those functions twice, once for the literal it meets first while inferring types.
         lo = np.int64(0)
         hi = initial_window(x[:M], v[:M], ahead)
-        Pd[0] = accelerations_once(x, v, Forces(c, inv_m, p, op, f0p, hist), hi, F, Kv[0], general)
+        Pd[0] = accelerations_once(x, v, Forces(c, inv_m, p, op, f0p, hist, dy), hi, F, Kv[0], general)
         for i in range(hi):
             Kx[0, i] = v[i]
         n_eval = np.int64(1)
@@ -327,8 +329,8 @@ def rk_kernel(method, general):
             VE = VS if method == KIND_RKN4 else Kx[6]
             XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
             OP = op[lo:]
-            H = hist[lo:]
-            FM = Forces(C, IM, p, OP, f0p[lo:], H)
+            H, DY = hist[lo:], dy[lo:]
+            FM = Forces(C, IM, p, OP, f0p[lo:], H, DY)
             while status < 0:
                 if n_acc + n_rej >= run.max_steps:
                     status = MAX_STEPS
@@ -378,7 +380,7 @@ def rk_kernel(method, general):
                             theta = first_root(method, ROOT_APPROACH, j, (w0, w1), Dense(X, V, Kx, Kv, h), FM, Q, QV)
                             weights(method, theta, Q, QV)
                             top = OP[j] + dense_compression(j, X, Kx, h, Q)
-                            if top > H[j] + HISTORY_RTOL * C[j] * C[j] * p.yield_overlap and theta < turn:
+                            if top > H[j] + HISTORY_RTOL * DY[j] and theta < turn:
                                 turn = theta
                     if turn < 1.0 - TURN_SLACK:
                         n_rej += 1
@@ -449,7 +451,7 @@ def rk_kernel(method, general):
                         weights(method, theta, Q, QV)
                         dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
                         if plastic:  # Thornton's force: the history moved by this step is not yet in H
-                            fp = plastic_force(dp, H[j], C[j], p)
+                            fp = plastic_force(dp, H[j], C[j], DY[j])
                         else:
                             fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
                         if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
@@ -537,7 +539,7 @@ def rk_kernel(method, general):
                             cut = True
                             if damped:  # the power of the contacts still integrated (the next step's first stage)
                                 Pd[0] = accelerations_once(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:],
-                                                                                  hist[lo:]), hi - lo, F, Kv[0], general)
+                                                                                  hist[lo:], dy[lo:]), hi - lo, F, Kv[0], general)
                                 n_eval += 1
                     if relax_lag > 0 and front >= relax_lag:
                         relaxed = max(0, obs[front - relax_lag] - lo)
@@ -546,8 +548,8 @@ def rk_kernel(method, general):
                     status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], p.wall, hi - lo, t, run, exit_since, t_needed)
                 elif plastic:  # a yielded last contact opens at its plastic overlap (the dent it keeps)
                     gap = 0.0
-                    if hist[M - 2] > c[M - 2] * c[M - 2] * p.yield_overlap:
-                        gap = unloading_curve(hist[M - 2], c[M - 2] * c[M - 2] * p.yield_overlap)[1] - op[M - 2]
+                    if hist[M - 2] > dy[M - 2]:
+                        gap = unloading_curve(hist[M - 2], dy[M - 2])[1] - op[M - 2]
                     status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed, gap)
                 else:
                     status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed)
@@ -566,19 +568,19 @@ def rk_kernel(method, general):
         if plastic:  # as final_force_peaks, by Thornton's force and each contact's history
             for j in range(X.shape[0] - 1):
                 if V[j] - V[j + 1] > 0.0:
-                    f = plastic_force(op[lo + j] + (X[j] - X[j + 1]), hist[lo + j], C[j], p)
+                    f = plastic_force(op[lo + j] + (X[j] - X[j + 1]), hist[lo + j], C[j], dy[lo + j])
                     if f > 0.0 and is_new_peak(f, peak_f[lo + j], peak_rtol):
                         peak_f[lo + j] = f
                         peak_ft[lo + j] = t
             for j in range(M - 1):  # the plastic work, a function of the history; the final history returned
-                dissipated += plastic_work(hist[j], c[j], p)
+                dissipated += plastic_work(hist[j], c[j], dy[j])
                 h0[j] = hist[j]
         else:
             final_force_peaks(X, V, C, p, lo, t, peak_rtol, peak_f, peak_ft)
         for k in range(lo):  # the granules behind the window continued ballistically
             x[k] += v[k] * (t - t_frozen[k])
         write_info(out.info, t, n_acc, n_rej, exit_since, n_eval, lo, frozen_potential, dissipated)
-        keep_alive(xp, vp, cp, inv_mp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, ratiop, peak_dp, t_frozenp, opp, f0pp, Pdp, histp)
+        keep_alive(xp, vp, cp, inv_mp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, ratiop, peak_dp, t_frozenp, opp, f0pp, Pdp, histp, dyp)
         for i in range(M):
             x0[i] = xp[i]
             v0[i] = vp[i]

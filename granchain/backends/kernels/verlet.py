@@ -80,7 +80,7 @@ def verlet_integrate(general, h, model, run, state, out):
     if p.static_force > 0.0:
         for j in range(M - 1):
             o[j], f0[j] = static_state(c[j], p)
-    fm = Forces(c, inv_m, p, o, f0, o)
+    fm = Forces(c, inv_m, p, o, f0, o, o)
     a = np.zeros(M)
     a_new = np.zeros(M)
     v_old = v.copy()  # the other pair of buffers (see the step loop)
