@@ -391,7 +391,7 @@ class Chain:
     def yield_overlaps(self):
         """Each contact's yield overlap under the chain's law (``granchain.ElasticPlastic``): c_k^2 delta_y,ref for
         granules of one material, else from the radii and the materials' yield stresses
-        (:meth:`granchain.model.contacts.ElasticPlastic.yield_overlaps`)."""
+        (:meth:`granchain.ElasticPlastic.yield_overlaps`)."""
         return contact_yield_overlaps(self.contact, self.stiffness, self.radii, self.meta)
 
     def with_observed(self, observed) -> "Chain":
