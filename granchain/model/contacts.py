@@ -327,14 +327,14 @@ class ElasticPlastic(ContactLaw):
     Below the yield overlap delta_y a contact is Hertzian, F = c delta^(3/2). Hertz's maximum contact
     pressure p0 = (2 E* / pi) (delta / R*)^(1/2) reaches the limiting pressure p_y there; beyond it the
     pressure is capped at p_y and the force grows linearly with the overlap, with the Hertz slope at
-    delta_y (Thornton's Eq. (16), F = F_y + pi p_y R* (delta - delta_y); in granchain's notation
+    delta_y (Thornton's F = F_y + pi p_y R* (delta - delta_y); in granchain's notation
     pi p_y R* = (3/2) c delta_y^(1/2)):
 
         F_load(delta) = c delta_y^(1/2) (3 delta - delta_y) / 2,            delta >= delta_y.
 
     Unloading from the largest overlap delta_m reached (force F* = F_load(delta_m)) is Hertzian with an
     enlarged radius of curvature R_p = R* (2 f + 1)^(3/2) / (3^(3/2) f), f = F* / F_y (Thornton's
-    Eq. (20) written with the yield force F_y = c delta_y^(3/2)), so that
+    unloading radius, written with the yield force F_y = c delta_y^(3/2)), so that
 
         F_unload(delta) = c_p (delta - delta_p)^(3/2),   c_p = c ((2 f + 1) / 3)^(3/4) f^(-1/2),
         delta_p = delta_m - (F* / c_p)^(2/3),
@@ -522,7 +522,7 @@ class ElasticPlastic(ContactLaw):
     def restitution_ratio(ratio: float) -> float:
         """Thornton's coefficient of restitution of two spheres at r = v_y / v (impact speed v):
         e = sqrt(6 sqrt(3) / 5) sqrt(1 - r^2 / 6) [r / (r + 2 sqrt(6/5 - r^2 / 5))]^(1/4) for r < 1, and 1
-        for r >= 1 (Thornton 1997, Eq. (34); derived again in ``docs/explanation/contacts.md``)."""
+        for r >= 1 (Thornton 1997; derived again in ``docs/explanation/contacts.md``)."""
         r = float(ratio)
         if r >= 1.0:
             return 1.0

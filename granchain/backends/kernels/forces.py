@@ -103,7 +103,7 @@ def law_force(d, w, c, p):
 def unloading_curve(m, dy):
     """(c_p / c, delta_p) of Thornton's unloading curve from the largest overlap ``m`` >= ``dy`` (the yield
     overlap): f = F* / F_y = (3 m / dy - 1) / 2, c_p / c = ((2 f + 1) / 3)^(3/4) f^(-1/2) (the enlarged radius of
-    curvature R_p, C. Thornton, J. Appl. Mech. 64, 383 (1997), Eq. (20)), delta_p = m - f dy (3 / (2 f + 1))^(1/2).
+    curvature R_p, C. Thornton, J. Appl. Mech. 64, 383 (1997)), delta_p = m - f dy (3 / (2 f + 1))^(1/2).
     (1, 0), Hertz's curve, for m = dy."""
     f = 1.5 * m / dy - 0.5
     q = (2.0 * f + 1.0) / 3.0
@@ -114,7 +114,7 @@ def unloading_curve(m, dy):
 def plastic_force(d, m, c, dy):
     """The force of Thornton's elastic-plastic contact (``granchain.model.contacts.ElasticPlastic``) at
     compression ``d`` whose largest overlap so far is ``m`` (>= its yield overlap ``dy``):
-    the loading line c dy^(1/2) (3 d - dy) / 2 where d >= m (Thornton's Eq. (16): a limiting contact pressure,
+    the loading line c dy^(1/2) (3 d - dy) / 2 where d >= m (Thornton's limiting contact pressure,
     the Hertz slope at dy), else the Hertzian unloading curve c_p (d - delta_p)^(3/2) from m
     (:func:`unloading_curve`: Hertz's c d^(3/2) for a contact that never yielded); 0 for d <= delta_p, and for
     the zero-stiffness padding."""
