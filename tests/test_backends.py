@@ -561,9 +561,9 @@ def test_a_new_params_field_compiles_and_reaches_the_forces(tmp_path):
     shutil.copytree(Path(gc.__file__).parent, root / "granchain", ignore=shutil.ignore_patterns("__pycache__"))
     kernels = root / "granchain" / "backends"
     edits = {
-        kernels / "kernels" / "records.py": [('"static_force", "clamp", "damping"], defaults=(True, 0))',
-                                              '"static_force", "clamp", "damping", "stiffening"], defaults=(True, 0, 1.0))')],
-        kernels / "numba_backend.py": [("bool(law.clamp), damping)", "bool(law.clamp), damping, 2.0)")],
+        kernels / "kernels" / "records.py": [('"damping", "yield_overlap"],\n                    defaults=(True, 0, 0.0))',
+                                              '"damping", "yield_overlap", "stiffening"],\n                    defaults=(True, 0, 0.0, 1.0))')],
+        kernels / "numba_backend.py": [("bool(law.clamp), damping, yield_overlap)", "bool(law.clamp), damping, yield_overlap, 2.0)")],
         kernels / "kernels" / "forces.py": [("return c * d * math.sqrt(d)", "return p.stiffening * c * d * math.sqrt(d)"),
                                             ("F[j + 1] = c[j] * d * math.sqrt(d)",
                                              "F[j + 1] = p.stiffening * c[j] * d * math.sqrt(d)")],
