@@ -564,7 +564,8 @@ def test_a_new_params_field_compiles_and_reaches_the_forces(tmp_path):
         kernels / "kernels" / "records.py": [('"damping", "yield_overlap"],\n                    defaults=(True, 0, 0.0))',
                                               '"damping", "yield_overlap", "stiffening"],\n                    defaults=(True, 0, 0.0, 1.0))')],
         kernels / "numba_backend.py": [("bool(law.clamp), damping, yield_overlap)", "bool(law.clamp), damping, yield_overlap, 2.0)")],
-        kernels / "kernels" / "forces.py": [("return c * d * math.sqrt(d)", "return p.stiffening * c * d * math.sqrt(d)"),
+        kernels / "kernels" / "forces.py": [("if pw == POW_HERTZ:\n        return c * d * math.sqrt(d)",
+                                             "if pw == POW_HERTZ:\n        return p.stiffening * c * d * math.sqrt(d)"),
                                             ("F[j + 1] = c[j] * d * math.sqrt(d)",
                                              "F[j + 1] = p.stiffening * c[j] * d * math.sqrt(d)")],
     }

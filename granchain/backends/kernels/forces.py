@@ -120,13 +120,15 @@ def plastic_force(d, m, c, dy):
     the zero-stiffness padding."""
     if d <= 0.0 or c == 0.0:
         return 0.0
-    if d >= m and d > dy:  # loading past the history and past yield
+    if d >= m:
+        if d <= dy:
+            return c * d * math.sqrt(d)
         return c * math.sqrt(dy) * (1.5 * d - 0.5 * dy)
-    if d < m and m > dy:  # unloading (or reloading) from a yielded contact's history
-        cp, dp = unloading_curve(m, dy)
-        e = d - dp
-        return c * cp * e * math.sqrt(e) if e > 0.0 else 0.0
-    return c * math.sqrt(d) * d  # Hertz, below yield
+    if m <= dy:
+        return c * d * math.sqrt(d)
+    cp, dp = unloading_curve(m, dy)
+    e = d - dp
+    return c * cp * e * math.sqrt(e) if e > 0.0 else 0.0
 
 
 @njit(**JIT_INTERNAL)
