@@ -182,7 +182,7 @@ class Chain:
         if radii is not None and radii.size != m.size:
             raise ValueError(f"radii has {radii.size} entries for {m.size} granules")
         if contact.history:
-            _check_yielding(contact, contact_yield_overlaps(contact, c, radii, self.meta), c, load)
+            _check_yielding(contact_yield_overlaps(contact, c, radii, self.meta), c, load)
         object.__setattr__(self, "masses", _frozen(m))
         object.__setattr__(self, "stiffness", _frozen(c))
         object.__setattr__(self, "n", n)
@@ -485,7 +485,7 @@ def contact_yield_overlaps(law, stiffness, radii, meta):
                               wall_material=meta.get("wall_material"))
 
 
-def _check_yielding(law, dy, stiffness, load) -> None:
+def _check_yielding(dy, stiffness, load) -> None:
     """Refuse a static load that has already yielded a contact under the elastic-plastic law
     (``granchain.ElasticPlastic``; yield overlaps ``dy``): the chain would not start in its elastic static state."""
     if load.force > 0.0:

@@ -498,17 +498,12 @@ class ElasticPlastic(ContactLaw):
         c = np.asarray(stiffness, dtype=float)
         dy = self.yield_overlaps(c) if yield_overlap is None else np.asarray(yield_overlap, dtype=float)
         m = np.maximum(np.asarray(history, dtype=float), dy)
-        with np.errstate(invalid="ignore"):  # a contact that cannot yield (dy = inf) does no plastic work
-            u = np.where(np.isfinite(dy), m / dy - 1.0, 0.0)
-        fy_dy = np.where(np.isfinite(dy), c * dy * dy * np.sqrt(dy), 0.0)  # F_y delta_y
+        u = m / dy - 1.0
+        fy_dy = c * dy * dy * np.sqrt(dy)  # F_y delta_y
         loading = fy_dy * (0.4 + u + 0.75 * u * u)  # the work along Hertz to delta_y, then the loading line
         f = 1.0 + 1.5 * u
         returned = 0.4 * fy_dy * f * f * np.sqrt(3.0 / (2.0 * f + 1.0))  # (2/5) F* (delta_m - delta_p)
         return np.where(c > 0.0, loading - returned, 0.0)
-
-    def elastic_force(self, compression, stiffness):
-        """Hertz's c delta^(3/2) (the virgin contact's force below yield, and the static state's)."""
-        return super().elastic_force(compression, stiffness)
 
     def force_rate(self, d, w, dw, c):
         """dF/dt on the loading branch (the force peaks with the compression on either branch)."""
