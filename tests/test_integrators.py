@@ -135,17 +135,23 @@ def test_dp5_error_follows_rtol():
 
 
 # -- DP5 kernel pieces ---------------------------------------------------------------------------
-def _error_norm_case(method, seed, hi=50):
-    """Random state and stages of ``hi`` granules: (hi, Kx, Kv, ratio, norm), ``norm()`` the error
-    norm of ``method`` on the arrays as they are when called (its ratios left in ``ratio``)."""
-    from granchain.backends.kernels.records import Steps
-    from granchain.backends.kernels.rkloop import error_norm
+def error_norm(scheme, x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
+    """The step loop's error norm of ``scheme`` (``kernels.schemes``): its error ratios into ``ratio``, then
+    their maximum (``rkloop.max_ratio``)."""
+    from granchain.backends.kernels.rkloop import max_ratio
 
+    scheme.module.error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
+    return max_ratio(ratio, hi)
+
+
+def _error_norm_case(scheme, seed, hi=50):
+    """Random state and stages of ``hi`` granules: (hi, Kx, Kv, ratio, norm), ``norm()`` the error
+    norm of ``scheme`` on the arrays as they are when called (its ratios left in ``ratio``)."""
     rng = np.random.default_rng(seed)
     x, v, xs, vs = (rng.random(hi) for _ in range(4))
     Kx, Kv = rng.random((7, hi)), rng.random((7, hi))
     ratio = np.zeros(2 * hi)
-    return hi, Kx, Kv, ratio, lambda: error_norm(method, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, Steps(1e-6, 1e-9, 0.0, 0.0, 0, 1.0, 0), ratio)
+    return hi, Kx, Kv, ratio, lambda: error_norm(scheme, x, v, xs, vs, Kx, Kv, 1e-3, hi, 0, 1.0, 1e-6, 1e-9, ratio)
 
 
 @pytest.mark.parametrize("where", [0, 1, 5, 40, 99])
@@ -153,9 +159,9 @@ def test_dp5_error_norm_keeps_a_nan(where):
     """A NaN ratio anywhere makes the error norm infinite (the step is refused as non-finite), also when
     finite ratios follow it (the max loop once let a later finite ratio overwrite the NaN); with all
     ratios finite the norm is their maximum, wherever it is."""
-    from granchain.backends.kernels.records import KIND_DP5
+    from granchain.backends.kernels.schemes import DP5
 
-    hi, Kx, Kv, ratio, norm = _error_norm_case(KIND_DP5, where)
+    hi, Kx, Kv, ratio, norm = _error_norm_case(DP5, where)
     err = norm()
     assert err == ratio.max() and math.isfinite(err)
     (Kx if where < hi else Kv)[3, where % hi] = np.nan
@@ -167,9 +173,9 @@ def test_dp5_error_norm_keeps_a_nan(where):
 def test_rkn4_error_norm_keeps_a_nan(where):
     """The same for RKN4's error estimate, which reads the stage accelerations Kv[0..3] only: a NaN
     there makes both the position and the velocity ratio of that granule NaN and the norm infinite."""
-    from granchain.backends.kernels.records import KIND_RKN4
+    from granchain.backends.kernels.schemes import RKN4
 
-    hi, Kx, Kv, ratio, norm = _error_norm_case(KIND_RKN4, where)
+    hi, Kx, Kv, ratio, norm = _error_norm_case(RKN4, where)
     err = norm()
     assert err == ratio.max() and math.isfinite(err)
     Kx[:, where] = np.nan  # not read by RKN4
@@ -187,8 +193,8 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
     """The error norm takes the maximum of the ratios as an integer maximum of their bit patterns; it
     must be exactly the floating-point maximum of |error| / scale computed independently (NumPy, the
     same operations in the same order), from subnormal to overflowing errors (inf: refused step)."""
-    from granchain.backends.kernels import dp5, rkloop
-    from granchain.backends.kernels.records import KIND_DP5, Steps
+    from granchain.backends.kernels import dp5
+    from granchain.backends.kernels.schemes import DP5
 
     rng = np.random.default_rng(seed)
     x, v, xs, vs = (rng.standard_normal(hi) for _ in range(4))
@@ -197,8 +203,7 @@ def test_dp5_error_norm_is_the_float_maximum(seed, hi, relaxed, exponent):
     with np.errstate(over="ignore", under="ignore"):
         Kx = np.ldexp(Kx, exponent)  # scaled by 2^exponent: subnormal ... inf
     h, rtol, atol, factor = 1e-3, 1e-6, 1e-9, 1000.0
-    err = rkloop.error_norm(KIND_DP5, x, v, xs, vs, Kx, Kv, h, hi, relaxed, Steps(rtol, atol, 0.0, 0.0, 0, factor, 0),
-                             np.zeros(2 * hi))
+    err = error_norm(DP5, x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, np.zeros(2 * hi))
 
     E = (dp5.E1, dp5.E3, dp5.E4, dp5.E5, dp5.E6, dp5.E7)
     rows = (0, 2, 3, 4, 5, 6)

@@ -28,10 +28,10 @@ SCRIPT = textwrap.dedent(
     import numba
     import numpy as np
     import granchain as gc
-    from granchain.backends.kernels import dispatch, forces, rkloop, verlet
+    from granchain.backends.kernels import dispatch, forces, rkloop, schemes, verlet
 
     assert numba.config.DISABLE_JIT
-    for f in (dispatch.dp5_chain, rkloop.rk_kernel(0, False), verlet.verlet_integrate, forces.accelerations):
+    for f in (dispatch.dp5_chain, rkloop.rk_kernel(schemes.DP5, False), verlet.verlet_integrate, forces.accelerations):
         assert inspect.isfunction(f), type(f)
 
     chains = {chains}

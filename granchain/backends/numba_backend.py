@@ -18,10 +18,9 @@ from . import Backend, aligned_outputs, batch_chain, effective_integrator, warm
 from .kernels.batch import integrate_batch, row_records, thread_sums
 from .kernels.dispatch import chain_kernel, integrate_chain, kernel_function
 from .kernels.forces import DAMPING_KUWABARA_KONO, LAW_FORMS, power_code
+from .kernels.schemes import SCHEMES
 from .kernels.records import (
     INFO_SIZE,
-    KIND_DP5,
-    KIND_RKN4,
     KIND_VERLET,
     Batch,
     Method,
@@ -43,15 +42,17 @@ def kernel_array(a, dtype=float) -> np.ndarray:
 
 
 def _rk_params(integ) -> np.ndarray:
-    """DP5's and RKN4's settings in the layout of ``rkloop.unpack_steps``."""
-    return np.array([integ.rtol, integ.atol, integ.first_step, integ.fixed_step or 0.0, integ.relaxed_lag or 0,
-                     integ.relaxed_factor, integ.window_lag or 0])
+    """The step control of a Runge-Kutta integrator (DP5, RKN4: ``integ.step_control``) in the layout of
+    ``rkloop.unpack_steps``."""
+    c = integ.step_control
+    return np.array([c.rtol, c.atol, c.first_step, c.fixed_step or 0.0, c.relaxed_lag or 0, c.relaxed_factor,
+                     c.window_lag or 0])
 
 
-#: Integrator name -> (kernel kind, settings packer): the one table that maps an integrator to a kernel.
+#: Integrator name -> (kernel kind, settings packer): the one table that maps an integrator to a kernel
+#: (every Runge-Kutta scheme of ``kernels.schemes`` by its name, and Verlet).
 METHODS = {
-    "dp5": (KIND_DP5, _rk_params),
-    "rkn4": (KIND_RKN4, _rk_params),
+    **{s.name: (s.kind, _rk_params) for s in SCHEMES.values()},
     "verlet": (KIND_VERLET, lambda integ: np.array([integ.dt])),
 }
 
@@ -130,7 +131,7 @@ class NumbaBackend(Backend):
         the paper's chains with another method first and DP5 later (the ensembles' defaults: RKN4 for the
         decorated chains, then DP5 for the effective ones), so that a first run compiles the two on two
         cores; None otherwise."""
-        first, *later = (integ.name for integ in integrators)  # (RKN4 is a subclass of DP5: by name)
+        first, *later = (integ.name for integ in integrators)
         if first == "dp5" or "dp5" not in later:
             return None
         return warm.compile_elsewhere("dp5")

@@ -5,6 +5,8 @@ Each declares its ``name``, its convergence ``order``, the ``backend`` that runs
 (``granchain.backends``: "numba" for the compiled DP5, RKN4 and Verlet, "scipy" for DOP853) and
 what it needs of the model and supports: ``needs_conservative_forces`` (a method for x'' = f(x):
 RKN4, Verlet), ``supports_goal_control`` (the relaxed zone and trailing window of DP5 and RKN4).
+The adaptive Runge-Kutta methods are siblings (:class:`AdaptiveRK`): each is a scheme of the compiled
+step loop (``granchain.backends.kernels.schemes``, by its ``name``) run under a :class:`StepControl`.
 None of them calls compiled code: :meth:`Integrator.integrate` and :meth:`Integrator.integrate_batch`
 hand the integrator and the chain to its backend, which binds them to its code. That is the one seam
 through which ``simulate`` and ``run_ensemble`` reach any integrator; the test-suite loops over
@@ -21,7 +23,7 @@ import numpy as np
 
 from .._validate import count, finite_scalar
 
-__all__ = ["Integrator", "DP5", "RKN4", "Verlet", "VerletStabilityWarning", "verlet_omega_max", "DOP853", "INTEGRATORS", "RunControls", "get_integrator"]
+__all__ = ["Integrator", "StepControl", "AdaptiveRK", "DP5", "RKN4", "Verlet", "VerletStabilityWarning", "verlet_omega_max", "DOP853", "INTEGRATORS", "RunControls", "get_integrator"]
 
 
 #: Validated goal-oriented settings of :meth:`DP5.relaxed` and :meth:`DP5.windowed` (lags counted in
@@ -148,7 +150,114 @@ class Integrator:
 
 
 @dataclass(frozen=True)
-class DP5(Integrator):
+class StepControl:
+    """The step control of the adaptive Runge-Kutta methods (:class:`DP5`, :class:`RKN4`), a value of its
+    own: the tolerances, the first step, a fixed step (control off), and the goal-oriented zones (the
+    relaxed zone and the trailing window; see :class:`DP5` for what they do and their accuracy contract).
+    The method (the scheme: its stages, error estimate and dense output) is the integrator's; this is
+    what a run asks of it. ``integrator.step_control`` gives it, validated.
+    """
+
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    first_step: float = 1e-3
+    fixed_step: float | None = None
+    relaxed_lag: int | None = None
+    relaxed_factor: float = 1000.0
+    window_lag: int | None = None
+
+    def __post_init__(self):
+        rtol, atol = _tolerances(self.rtol, self.atol)
+        object.__setattr__(self, "rtol", rtol)
+        object.__setattr__(self, "atol", atol)
+        object.__setattr__(self, "first_step", finite_scalar("first_step", self.first_step, positive=True))
+        if self.fixed_step is not None:
+            object.__setattr__(self, "fixed_step", finite_scalar("fixed_step", self.fixed_step, positive=True))
+        for name in ("relaxed_lag", "window_lag"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, count(name, getattr(self, name), minimum=1))
+        factor = finite_scalar("relaxed_factor", self.relaxed_factor, positive=True)
+        if factor < 1.0:
+            raise ValueError(f"relaxed_factor = {factor:g} would tighten the tolerance behind the pulse; use a factor >= 1")
+        object.__setattr__(self, "relaxed_factor", factor)
+        if self.relaxed_lag is not None and self.rtol * factor >= 1.0:
+            raise ValueError(f"the relaxed zone's tolerance rtol * relaxed_factor = {self.rtol * factor:g} must stay below 1 "
+                             "(it would control nothing there): lower rtol or relaxed_factor")
+        if self.relaxed_lag is not None and self.window_lag is not None and self.relaxed_lag >= self.window_lag:
+            raise ValueError(f"relaxed_lag = {self.relaxed_lag} must be smaller than window_lag = {self.window_lag}: "
+                             "the relaxed zone lies between the front and the trailing window")
+
+    @property
+    def is_exact(self) -> bool:
+        """True when every granule is integrated to the end with the full tolerance."""
+        return self.relaxed_lag is None and self.window_lag is None
+
+
+@dataclass(frozen=True)
+class AdaptiveRK(Integrator):
+    """Base of the compiled adaptive Runge-Kutta methods (:class:`DP5`, :class:`RKN4`): their settings are
+    a :class:`StepControl` (its fields, validated by it), their method a scheme of the compiled step loop
+    (``granchain.backends.kernels.schemes``, by the integrator's ``name``). Siblings share the step control,
+    the goal-oriented constructors :meth:`relaxed` and :meth:`windowed` and the records, nothing of each
+    other's method."""
+
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    first_step: float = 1e-3
+    fixed_step: float | None = None
+    relaxed_lag: int | None = None
+    relaxed_factor: float = 1000.0
+    window_lag: int | None = None
+
+    supports_goal_control: ClassVar[bool] = True
+    #: The tolerances of :meth:`relaxed` and :meth:`windowed` (each method's own, validated).
+    goal_tolerances: ClassVar[tuple]
+
+    def __post_init__(self):
+        control = StepControl(*(getattr(self, f.name) for f in dataclasses.fields(StepControl)))
+        for f in dataclasses.fields(StepControl):
+            object.__setattr__(self, f.name, getattr(control, f.name))
+
+    @property
+    def step_control(self) -> StepControl:
+        """The integrator's :class:`StepControl` (its step-control fields, as one value)."""
+        return StepControl(*(getattr(self, f.name) for f in dataclasses.fields(StepControl)))
+
+    @property
+    def is_exact(self) -> bool:
+        """True when every granule is integrated to the end with the full tolerance."""
+        return self.step_control.is_exact
+
+    @property
+    def goal_oriented(self) -> bool:
+        """True with a relaxed zone or a trailing window (switched off for chains whose boundary does
+        not license them: ``granchain.backends.effective_integrator``)."""
+        return not self.is_exact
+
+    @classmethod
+    def relaxed(cls, rtol: float | None = None, atol: float | None = None) -> "AdaptiveRK":
+        """The method with the validated relaxed zone: granules more than 4 observed granules behind
+        the front at 1000 times looser tolerances; every granule integrated to the end
+        (``RELAXED_LAG``, ``RELAXED_FACTOR`` in ``granchain.solve.integrators``). ``rtol``, ``atol`` default
+        to the method's validated ``goal_tolerances`` (DP5: 1e-6, 1e-9; RKN4: 3e-6, 3e-9)."""
+        return cls(*cls._goal_tolerances(rtol, atol), relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)
+
+    @classmethod
+    def windowed(cls, rtol: float | None = None, atol: float | None = None) -> "AdaptiveRK":
+        """:meth:`relaxed` plus the trailing window 7 observed granules behind the front
+        (``WINDOW_LAG``): cost linear in N, peaks as accurate, the averaged pulse's tail not (see
+        the class notes)."""
+        return cls(*cls._goal_tolerances(rtol, atol), relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR,
+                   window_lag=WINDOW_LAG)
+
+    @classmethod
+    def _goal_tolerances(cls, rtol, atol) -> tuple:
+        default_rtol, default_atol = cls.goal_tolerances
+        return (default_rtol if rtol is None else rtol, default_atol if atol is None else atol)
+
+
+@dataclass(frozen=True)
+class DP5(AdaptiveRK):
     """Compiled adaptive Dormand-Prince 5(4), PI step control, max-norm error (simulate's default).
 
     The defaults keep peak velocities and times within ~1e-7 (relative) of DOP853 at rtol 1e-10
@@ -211,72 +320,10 @@ class DP5(Integrator):
     still integrated (those behind the window are behind the pulse by construction).
     """
 
-    rtol: float = 1e-8
-    atol: float = 1e-10
-    first_step: float = 1e-3
-    fixed_step: float | None = None
-    relaxed_lag: int | None = None
-    relaxed_factor: float = 1000.0
-    window_lag: int | None = None
-
     name: ClassVar[str] = "dp5"
     order: ClassVar[int] = 5
-    supports_goal_control: ClassVar[bool] = True
     #: The tolerances of :meth:`relaxed` and :meth:`windowed` (validated, tests/test_window.py).
     goal_tolerances: ClassVar[tuple] = (1e-6, 1e-9)
-
-    def __post_init__(self):
-        rtol, atol = _tolerances(self.rtol, self.atol)
-        object.__setattr__(self, "rtol", rtol)
-        object.__setattr__(self, "atol", atol)
-        object.__setattr__(self, "first_step", finite_scalar("first_step", self.first_step, positive=True))
-        if self.fixed_step is not None:
-            object.__setattr__(self, "fixed_step", finite_scalar("fixed_step", self.fixed_step, positive=True))
-        for name in ("relaxed_lag", "window_lag"):
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, count(name, getattr(self, name), minimum=1))
-        factor = finite_scalar("relaxed_factor", self.relaxed_factor, positive=True)
-        if factor < 1.0:
-            raise ValueError(f"relaxed_factor = {factor:g} would tighten the tolerance behind the pulse; use a factor >= 1")
-        object.__setattr__(self, "relaxed_factor", factor)
-        if self.relaxed_lag is not None and self.rtol * factor >= 1.0:
-            raise ValueError(f"the relaxed zone's tolerance rtol * relaxed_factor = {self.rtol * factor:g} must stay below 1 "
-                             "(it would control nothing there): lower rtol or relaxed_factor")
-        if self.relaxed_lag is not None and self.window_lag is not None and self.relaxed_lag >= self.window_lag:
-            raise ValueError(f"relaxed_lag = {self.relaxed_lag} must be smaller than window_lag = {self.window_lag}: "
-                             "the relaxed zone lies between the front and the trailing window")
-
-    @property
-    def is_exact(self) -> bool:
-        """True when every granule is integrated to the end with the full tolerance."""
-        return self.relaxed_lag is None and self.window_lag is None
-
-    @property
-    def goal_oriented(self) -> bool:
-        """True with a relaxed zone or a trailing window (switched off for chains whose boundary does
-        not license them: ``granchain.backends.effective_integrator``)."""
-        return not self.is_exact
-
-    @classmethod
-    def relaxed(cls, rtol: float | None = None, atol: float | None = None) -> "DP5":
-        """The method with the validated relaxed zone: granules more than 4 observed granules behind
-        the front at 1000 times looser tolerances; every granule integrated to the end
-        (``RELAXED_LAG``, ``RELAXED_FACTOR`` in ``granchain.solve.integrators``). ``rtol``, ``atol`` default
-        to the method's validated ``goal_tolerances`` (DP5: 1e-6, 1e-9; RKN4: 3e-6, 3e-9)."""
-        return cls(*cls._goal_tolerances(rtol, atol), relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR)
-
-    @classmethod
-    def windowed(cls, rtol: float | None = None, atol: float | None = None) -> "DP5":
-        """:meth:`relaxed` plus the trailing window 7 observed granules behind the front
-        (``WINDOW_LAG``): cost linear in N, peaks as accurate, the averaged pulse's tail not (see
-        the class notes)."""
-        return cls(*cls._goal_tolerances(rtol, atol), relaxed_lag=RELAXED_LAG, relaxed_factor=RELAXED_FACTOR,
-                   window_lag=WINDOW_LAG)
-
-    @classmethod
-    def _goal_tolerances(cls, rtol, atol) -> tuple:
-        default_rtol, default_atol = cls.goal_tolerances
-        return (default_rtol if rtol is None else rtol, default_atol if atol is None else atol)
 
     def describe(self) -> dict:
         record = super().describe()
@@ -287,9 +334,10 @@ class DP5(Integrator):
 
 
 @dataclass(frozen=True)
-class RKN4(DP5):
+class RKN4(AdaptiveRK):
     """Compiled adaptive Runge-Kutta-Nystrom 4(3) (Dormand, El-Mikkawy & Prince 1987, "RKN4(3)4FM"):
-    DP5's settings, step control, goal-oriented zones and records, with a method made for x'' = f(x).
+    DP5's sibling (the same :class:`StepControl`, goal-oriented zones and records), with a method made
+    for x'' = f(x).
 
     Three force evaluations per step (DP5: six), order 4 with a 3rd-order error estimate, dense
     output by the quintic Hermite interpolant of the positions (``granchain.backends.kernels.rkn4``). A
@@ -298,8 +346,8 @@ class RKN4(DP5):
     random N = 26 decorated chains it takes ~0.9x DP5's steps at half the force evaluations each.
     Its tolerances are not DP5's: at rtol 1e-5 its peak velocities are as accurate as DP5's at 1e-6
     (and more so at the free end of short chains), but its peak contact forces are not: they set its
-    tolerance (``goal_tolerances``), so ``RKN4.relaxed()`` and ``RKN4.windowed()`` (inherited:
-    :meth:`DP5.relaxed`, :meth:`DP5.windowed`) take rtol 3e-6
+    tolerance (``goal_tolerances``), so ``RKN4.relaxed()`` and ``RKN4.windowed()`` (the siblings' own:
+    :meth:`AdaptiveRK.relaxed`, :meth:`AdaptiveRK.windowed`) take rtol 3e-6
     (the decorated ensembles' :func:`granchain.ensemble_integrator`; tests/test_window.py). For
     smooth chains (no light granules) it saves nothing over DP5 at equal accuracy.
     """

@@ -7,9 +7,10 @@ grid. Peak contact forces the same way: contact j's compression peaks where the 
 relative velocity v_j - v_{j+1} changes sign from + to -; the force there is c_j delta^(n-1) of the
 dense-output positions (Eq. motion_rescaled).
 
-Both methods evaluate their dense output as y + h sum_s K[s] Q[s] with their own weights Q: DP5's
-continuous extension (``dp5.dense_weights``, one set for positions and velocities) or RKN4's
-quintic Hermite pair (``rkn4.hermite_weights``).
+Every scheme (``schemes``) evaluates its dense output as y + h sum_s K[s] Q[s] with its own weights Q:
+DP5's continuous extension (``dp5.weights``, one set for positions and velocities) or RKN4's quintic
+Hermite pair (``rkn4.weights``). The root searches take the scheme's kind as a run-time value and ask
+``schemes.dense_weights`` for them.
 """
 
 from __future__ import annotations
@@ -17,10 +18,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from . import dp5, rkn4
 from .forces import contact_force, contact_law_force, force_rate
 from .jit import JIT_INLINE, JIT_INTERNAL, named
-from .records import KIND_RKN4
+from .schemes import dense_weights
 
 #: What :func:`first_root` follows across a step: the acceleration of a granule (its velocity
 #: maximum) or the relative velocity of a contact (its compression, i.e. force, maximum).
@@ -31,19 +31,8 @@ ROOT_FORCE_RATE = 2
 
 
 @njit(**JIT_INTERNAL)
-def weights(method, theta, Qx, Qv):
-    """Dense-output weights at t + theta h: positions x + h sum_s Kx[s] Qx[s], velocities
-    v + h sum_s Kv[s] Qv[s]. DP5 has one set (``Qv`` is ``Qx``: filled once); RKN4 its Hermite pair
-    (``rkn4.hermite_weights``)."""
-    if method == KIND_RKN4:
-        rkn4.hermite_weights(theta, Qx, Qv)
-    else:
-        dp5.dense_weights(theta, Qx)
-
-
-@njit(**JIT_INTERNAL)
 def dense_value(y0, K, k, h, Q):
-    """y_k(t + theta h) = y0 + h sum_s K[s, k] Q[s], Q the weights at theta (:func:`weights`)."""
+    """y_k(t + theta h) = y0 + h sum_s K[s, k] Q[s], Q the weights at theta (``schemes.dense_weights``)."""
     acc = 0.0
     for s in range(7):
         acc += K[s, k] * Q[s]
@@ -53,7 +42,7 @@ def dense_value(y0, K, k, h, Q):
 @njit(**JIT_INTERNAL)
 def dense_compression(j, x, Kx, h, Q):
     """Compression x_j - x_{j+1} of contact j from the dense-output positions at the time whose
-    weights ``Q`` holds (:func:`weights` already called)."""
+    weights ``Q`` holds (``schemes.dense_weights`` already called)."""
     return dense_value(x[j], Kx, j, h, Q) - dense_value(x[j + 1], Kx, j + 1, h, Q)
 
 
@@ -61,7 +50,7 @@ def dense_compression(j, x, Kx, h, Q):
 def dense_force(j, step, fm, Q, Qv):
     """The force of contact j by the chain's law (``forces.law_force``: its static overlap included, and
     its rate of compression for a viscoelastic law) from the dense output of ``step``
-    (``records.Dense``) at the time whose weights ``Q``, ``Qv`` hold (:func:`weights` already called)."""
+    (``records.Dense``) at the time whose weights ``Q``, ``Qv`` hold (``schemes.dense_weights`` already called)."""
     x, v, Kx, Kv, h = step
     p, o = fm.params, fm.overlap
     d = o[j] + dense_compression(j, x, Kx, h, Q)
@@ -72,14 +61,14 @@ def dense_force(j, step, fm, Q, Qv):
 
 
 @njit(**JIT_INTERNAL)
-def dense_acceleration(method, theta, k, step, fm, Q, Qv):
+def dense_acceleration(kind, theta, k, step, fm, Q, Qv):
     """Acceleration of granule k at t + theta h from the dense output of ``step`` (``records.Dense``),
     forces from ``fm`` (``records.Forces``; the dynamic forces of ``forces.accelerations``: each
     contact's force by its law, static overlap included, less its static force)."""
     x, v, Kx, Kv, h = step
     c, inv_m, p, o, f0, _, _ = fm
     M = x.shape[0]
-    weights(method, theta, Q, Qv)
+    dense_weights(kind, theta, Q, Qv)
     xk = dense_value(x[k], Kx, k, h, Q)
     left = 0.0
     right = 0.0
@@ -103,21 +92,21 @@ def dense_acceleration(method, theta, k, step, fm, Q, Qv):
 
 
 @njit(**JIT_INTERNAL)
-def relative_velocity(method, theta, i, step, Q, Qv):
+def relative_velocity(kind, theta, i, step, Q, Qv):
     """v_i - v_{i+1} of contact i at t + theta h on the dense output of ``step`` (its compression
     rate: the compression peaks where it falls through 0)."""
     x, v, Kx, Kv, h = step
-    weights(method, theta, Q, Qv)
+    dense_weights(kind, theta, Q, Qv)
     return dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
 
 
 @njit(**JIT_INTERNAL)
-def dense_force_rate(method, theta, i, step, fm, Q, Qv):
+def dense_force_rate(kind, theta, i, step, fm, Q, Qv):
     """The rate of contact i's force (``forces.force_rate``) at t + theta h on the dense output of
     ``step``: a viscoelastic force peaks where it falls through 0."""
     x, v, Kx, Kv, h = step
-    dw = (dense_acceleration(method, theta, i, step, fm, Q, Qv)
-          - dense_acceleration(method, theta, i + 1, step, fm, Q, Qv))
+    dw = (dense_acceleration(kind, theta, i, step, fm, Q, Qv)
+          - dense_acceleration(kind, theta, i + 1, step, fm, Q, Qv))
     c, _, p, o, _, _, _ = fm
     d = o[i] + dense_compression(i, x, Kx, h, Q)
     w = dense_value(v[i], Kv, i, h, Qv) - dense_value(v[i + 1], Kv, i + 1, h, Qv)
@@ -128,7 +117,7 @@ def _root_search(what):
     """The root search of :func:`first_root` for the function followed ``what`` (``ROOT_*``): the
     acceleration of granule i (:func:`dense_acceleration`), the relative velocity of contact i
     (:func:`relative_velocity`) or the rate of its force (:func:`dense_force_rate`), on the dense
-    output (weights ``Q`` for positions, ``Qv`` for velocities, see :func:`weights`).
+    output (weights ``Q`` for positions, ``Qv`` for velocities, see ``schemes.dense_weights``).
 
     ``what`` is a constant of the search's code (this closure's variable, whose branches Numba
     prunes): each search compiles the one function it follows. With ``what`` a literal argument, each
@@ -137,7 +126,7 @@ def _root_search(what):
 
     @njit(**JIT_INTERNAL)
     @named(("acceleration", "approach", "force_rate")[what])
-    def search(method, i, f01, step, fm, Q, Qv):
+    def search(kind, i, f01, step, fm, Q, Qv):
         lo, hi = 0.0, 1.0
         f_lo, f_hi = f01
         theta = 0.0
@@ -150,11 +139,11 @@ def _root_search(what):
             else:
                 theta = 0.5 * (lo + hi)
             if what == ROOT_ACCELERATION:
-                f = dense_acceleration(method, theta, i, step, fm, Q, Qv)
+                f = dense_acceleration(kind, theta, i, step, fm, Q, Qv)
             elif what == ROOT_APPROACH:
-                f = relative_velocity(method, theta, i, step, Q, Qv)
+                f = relative_velocity(kind, theta, i, step, Q, Qv)
             else:
-                f = dense_force_rate(method, theta, i, step, fm, Q, Qv)
+                f = dense_force_rate(kind, theta, i, step, fm, Q, Qv)
             if f > 0.0:
                 lo, f_lo = theta, f
                 if side == -1:
@@ -178,7 +167,7 @@ _force_rate_root = _root_search(ROOT_FORCE_RATE)
 
 
 @njit(**JIT_INLINE)
-def first_root(method, what, i, f01, step, fm, Q, Qv):
+def first_root(kind, what, i, f01, step, fm, Q, Qv):
     """First theta in [0, 1] where the followed function (f01 = its values (+ at 0, <= 0 at 1)) stops
     being positive: a granule's velocity maximum (``ROOT_ACCELERATION``), a contact's compression
     maximum (``ROOT_APPROACH``) or its force maximum (``ROOT_FORCE_RATE``).
@@ -188,12 +177,12 @@ def first_root(method, what, i, f01, step, fm, Q, Qv):
     whole interval and the first zero is wanted).
 
     Inlined into the step loop, where ``what`` is a constant: a call of the search compiled for it
-    (:func:`_root_search`). The method reaches it as a run-time value (``method`` is a constant in the
-    step loop, which Numba would pass on as a literal): one search serves DP5 and RKN4, compiled once
-    for a run that uses both (the paper's ensembles), and its dense output tests the method at each
-    evaluation, a branch always taken the same way.
+    (:func:`_root_search`). The scheme's ``kind`` reaches it as a run-time value (it is a constant in the
+    step loop, which Numba would pass on as a literal): one search serves every scheme, compiled once
+    for a run that uses several (the paper's ensembles: DP5 and RKN4), and its dense output tests the
+    kind at each evaluation (``schemes.dense_weights``), a branch always taken the same way.
     """
-    kind = np.int64(method)
+    kind = np.int64(kind)
     if what == ROOT_ACCELERATION:
         return _acceleration_root(kind, i, f01, step, fm, Q, Qv)
     if what == ROOT_APPROACH:

@@ -6,11 +6,12 @@ picks, so a realisation of an ensemble is integrated by exactly the code (and to
 ``simulate`` uses. Each entry point is its own compiled function and Numba compiles a function on
 its first call: a run compiles the one kernel it uses (a first ``granchain pulse`` compiles DP5 for
 the paper's chain, not RKN4, Verlet or the real-contact loops). The Runge-Kutta entry points are
-made by ``rkloop.rk_kernel``, with the method and the model class constants of their code. The
+made by ``rkloop.rk_kernel``, with the method's scheme (``schemes``) and the model class constants of
+their code, one per scheme of ``schemes.SCHEMES`` and model class, made when first asked for. The
 ensemble kernel calls an entry point through its address (:func:`kernel_function`), so that one
 ensemble kernel serves every entry point and the entry point's machine code is the very code
-``simulate`` runs, compiled once. A new compiled method adds its kind (``records.KIND_*``), an entry
-point here and its binding in ``granchain.backends.numba_backend``.
+``simulate`` runs, compiled once. A new Runge-Kutta method is a new scheme (``schemes``): nothing here
+changes.
 
 The common contract of every single-chain kernel ``kernel(method, model, run, state, out)``:
 integrate ``model`` from ``state`` at t = 0 with ``method`` (``records.Method``), record the observed
@@ -25,18 +26,32 @@ from numba import njit, typeof
 from numba.core.types import WrapperAddressProtocol
 
 from .jit import JIT
-from .records import KIND_DP5, KIND_RKN4, KIND_VERLET
+from .records import KIND_VERLET
 from .rkloop import rk_kernel
+from .schemes import DP5, RKN4, SCHEMES
 from .verlet import verlet_integrate
 
+#: The Runge-Kutta entry points made so far, by (kind, general): see :func:`rk_chain`.
+_RK_CHAINS = {}
+
+
+def rk_chain(kind: int, general: bool):
+    """The Runge-Kutta entry point of the scheme ``kind`` (``schemes.SCHEMES``) for the model class
+    ``general`` (real contacts), made on first use and kept (Numba compiles it on its first call)."""
+    key = (kind, bool(general))
+    if key not in _RK_CHAINS:
+        _RK_CHAINS[key] = rk_kernel(SCHEMES[kind], key[1])
+    return _RK_CHAINS[key]
+
+
 #: DP5 on the paper's chain (elastic, unloaded: ``forces.accelerations`` with ``general`` False).
-dp5_chain = rk_kernel(KIND_DP5, False)
-#: DP5 with real contacts (a static load, viscoelastic damping).
-dp5_chain_general = rk_kernel(KIND_DP5, True)
+dp5_chain = rk_chain(DP5.kind, False)
+#: DP5 with real contacts (a static load, damping, yielding contacts).
+dp5_chain_general = rk_chain(DP5.kind, True)
 #: RKN4(3) on the paper's chain.
-rkn4_chain = rk_kernel(KIND_RKN4, False)
+rkn4_chain = rk_chain(RKN4.kind, False)
 #: RKN4(3) with a static load (RKN4 refuses damping: its forces may not read velocities).
-rkn4_chain_general = rk_kernel(KIND_RKN4, True)
+rkn4_chain_general = rk_chain(RKN4.kind, True)
 
 
 @njit(**JIT)
@@ -62,10 +77,8 @@ def chain_kernel(kind: int, params):
     general = is_general(params)
     if kind == KIND_VERLET:
         return verlet_chain_general if general else verlet_chain
-    if kind == KIND_DP5:
-        return dp5_chain_general if general else dp5_chain
-    if kind == KIND_RKN4:
-        return rkn4_chain_general if general else rkn4_chain
+    if kind in SCHEMES:
+        return rk_chain(kind, general)
     raise ValueError(f"no compiled kernel of kind {kind!r}")
 
 

@@ -13,7 +13,20 @@ from numba import njit
 from .forces import accelerations
 from .jit import JIT_INLINE, JIT_INTERNAL
 
+# The scheme's constants (``schemes.Scheme``: what the generic step loop ``rkloop`` is specialised on).
 ORDER = 5
+#: The embedded error estimate is O(h^5) (5th- minus 4th-order solution): the PI controller's exponent.
+ERROR_ORDER = 5
+#: Force evaluations per step (stages 2..7; the 7th is the next step's first, FSAL).
+EVALUATIONS = 6
+#: The dense output is the stages themselves: nothing to lay out before it is read.
+LAZY_DENSE = False
+#: One set of dense-output weights for positions and velocities.
+SEPARATE_VELOCITY_WEIGHTS = False
+#: The step's end velocities are the last stage's, Kx[6] (FSAL).
+END_IN_STAGE = True
+#: The stages pass their velocities to the forces (damping laws) and report the dissipated power.
+VELOCITY_FORCES = True
 
 # Butcher tableau (rows: stages 2..6; stage 7 is the solution, FSAL).
 A = np.array(
@@ -48,6 +61,19 @@ def dense_weights(theta, Q):
     """Q[s] = sum_p P[s, p] theta^(p+1), so that y(theta) = y + h sum_s K_s Q[s]."""
     for s in range(7):
         Q[s] = theta * (P[s, 0] + theta * (P[s, 1] + theta * (P[s, 2] + theta * P[s, 3])))
+
+
+@njit(**JIT_INLINE)
+def weights(theta, Qx, Qv):
+    """The scheme's dense-output weights (``schemes``): one set, in ``Qx`` (``Qv`` is ``Qx`` where the
+    step loop reads velocities: ``SEPARATE_VELOCITY_WEIGHTS`` False)."""
+    dense_weights(theta, Qx)
+
+
+@njit(**JIT_INLINE)
+def dense_data(x, v, xs, vs, Kx, Kv, h, hi):
+    """Nothing to lay out: DP5's dense output is its stages (``LAZY_DENSE`` False; the step loop never
+    calls this, which exists so that every scheme has the same functions)."""
 
 
 # Coefficients as scalars so that Numba folds them into the unrolled stages.
@@ -126,7 +152,7 @@ def dissipated_error_ratio(Pd, h, e, rtol, atol):
 
 @njit(**JIT_INLINE)
 def error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
-    """DP5's error ratios of positions (ratio[0:hi]) and velocities (ratio[hi:2 hi]), see ``rkloop.error_norm``."""
+    """DP5's error ratios of positions (ratio[0:hi]) and velocities (ratio[hi:2 hi]), see ``rkloop.max_ratio``."""
     for i in range(hi):  # positions, then velocities: two loops of few streams each vectorise
         w = factor if i < relaxed else 1.0
         ex = h * (E1 * Kx[0, i] + E3 * Kx[2, i] + E4 * Kx[3, i] + E5 * Kx[4, i] + E6 * Kx[5, i] + E7 * Kx[6, i])

@@ -1,6 +1,8 @@
-"""The adaptive Runge-Kutta step loop shared by DP5 (``dp5``) and RKN4(3) (``rkn4``): PI step
-control, max-norm error, the active and trailing windows, peaks and grid samples from the dense
-output (``dense``), the stop rule (``stop``).
+"""The adaptive Runge-Kutta step loop, one generic loop specialised on a method's scheme (``schemes``:
+DP5, ``dp5``; RKN4(3), ``rkn4``): PI step control, max-norm error, the active and trailing windows,
+peaks and grid samples from the dense output (``dense``), the stop rule (``stop``). The step control
+(tolerances, the relaxed zone, the trailing window: ``records.Steps``) is the run's, separate from the
+scheme.
 
 Step control: the PI controller of Hairer, Norsett & Wanner, *Solving ODEs I*, Sec. II.4 (DOPRI5).
 The error norm is the maximum over components: the pulse is localised, and a root-mean-square norm
@@ -10,12 +12,12 @@ would dilute its error over the resting granules.
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 from numba import njit
 
 from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW
-from . import dp5, rkn4
 from .dense import (
     ROOT_ACCELERATION,
     ROOT_APPROACH,
@@ -26,7 +28,6 @@ from .dense import (
     falls,
     first_root,
     hermite_max_estimate,
-    weights,
 )
 from .forces import (
     accelerations_once,
@@ -48,7 +49,7 @@ from .peaks import (
     is_new_peak,
     write_info,
 )
-from .records import KIND_RKN4, Dense, Forces, Model, Outputs, Run, Steps
+from .records import Dense, Forces, Model, Outputs, Run, Steps
 from .stop import end_of_step, stop_time
 from .window import (
     advance_window,
@@ -63,11 +64,9 @@ SAFETY = 0.9
 #: estimate of that maximum reaches this fraction of the contact's recorded peak compression.
 SCREEN = 0.9
 BETA = 0.08  # PI controller: Gustafsson's value, few rejections when stability limits the step
-ALPHA = 0.2 - 0.75 * BETA  # error estimate O(h^5)
-ALPHA_RKN4 = 0.25 - 0.75 * BETA  # RKN4(3): error estimate O(h^4)
 MIN_FACTOR = 0.2
 MAX_FACTOR = 10.0
-#: Bit masks of a float64 (:func:`error_norm`): all but the sign; the exponent of inf and NaN.
+#: Bit masks of a float64 (:func:`max_ratio`): all but the sign; the exponent of inf and NaN.
 SIGN_CLEAR = 0x7FFF_FFFF_FFFF_FFFF
 EXPONENT_ALL_ONES = 0x7FF0_0000_0000_0000
 #: The padded layout: the loops over the window (stages, error norm, update) run
@@ -92,23 +91,25 @@ def padded_width(hw):
     return (hw + LANES - 1) // LANES * LANES
 
 
-@njit(**JIT_INLINE)
-def error_norm(method, x, v, xs, vs, Kx, Kv, h, hi, relaxed, steps, ratio):
-    """Max over components of |embedded error| / (w_i (atol + rtol max(|y|, |y_new|))); inf if the new
-    state is not finite. w_i = ``steps.relaxed_factor`` for the granules of the relaxed zone
-    (0..relaxed-1), else 1 (multiplying by 1 is exact: without a relaxed zone the norm is bitwise the
-    plain one). The ratios come from ``dp5.error_ratios`` or ``rkn4.error_ratios``.
+def pi_exponent(scheme) -> float:
+    """The PI controller's exponent of the error for ``scheme`` (``schemes.Scheme``): 1/q - 0.75 BETA for
+    an error estimate O(h^q) (Hairer, Norsett & Wanner, Sec. IV.2)."""
+    return 1.0 / scheme.error_order - 0.75 * BETA
 
-    The ratios go through the scratch array ``ratio`` so that the division loop vectorises; their
+
+@njit(**JIT_INLINE)
+def max_ratio(ratio, hi):
+    """The error norm from the scheme's error ratios (``error_ratios``: positions in ``ratio[:hi]``,
+    velocities in ``ratio[hi:2 hi]``): their maximum, inf if any is not finite. The ratios are
+    |embedded error| / (w_i (atol + rtol max(|y|, |y_new|))), w_i = ``steps.relaxed_factor`` for the
+    granules of the relaxed zone, else 1 (multiplying by 1 is exact: without a relaxed zone the norm is
+    bitwise the plain one).
+
+    The scheme's ratios go through the scratch array ``ratio`` so that its division loop vectorises; their
     maximum is then an integer maximum of their bit patterns (below; ``ratio[0]`` is overwritten with
     it). A NaN ratio (a non-finite state) is never lost to a later finite one: its pattern is above
     every finite one.
     """
-    factor, rtol, atol = steps.relaxed_factor, steps.rtol, steps.atol
-    if method == KIND_RKN4:
-        rkn4.error_ratios(x, v, xs, vs, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
-    else:
-        dp5.error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio)
     # The maximum of the bit patterns (sign cleared): for non-negative doubles their order is the
     # order of the numbers, inf and NaN above every finite one, and an integer maximum can vectorise
     # (a floating-point one cannot without fast-math; measured, no faster than the float loop it
@@ -184,33 +185,41 @@ def padded_arrays(model, state):
     return xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp, t_frozenp, histp, dyp
 
 
-def rk_kernel(method, general):
+def rk_kernel(scheme, general):
     """The compiled single-chain entry point ``kernel(record, model, run, state, out)`` of the
-    Runge-Kutta ``method`` (``records.KIND_DP5``, or ``KIND_RKN4``) for the model class ``general``
-    (see below): ``dispatch`` makes one per pair.
+    Runge-Kutta method ``scheme`` (``schemes.Scheme``: ``schemes.DP5``, ``schemes.RKN4``) for the model
+    class ``general`` (see below): ``dispatch`` makes one per pair.
 
-    ``method`` and ``general`` are constants of the kernel's code (variables of this closure, which
-    Numba compiles as constants and prunes the branches they decide before typing them): the DP5
-    kernel holds no RKN4 code, the paper's chain (``general`` False) none of the real contacts' (a
-    static load, damping and the dissipated power: see ``forces.accelerations``). One compiled
-    function holds the step loop and the set-up around it (:func:`padded_arrays` allocates its
-    arrays): it is compiled, and cached (Numba keys a closure's cache entry on the values of its
-    variables), only when a run uses it. The step loop used to be a
+    The scheme and ``general`` are constants of the kernel's code, which Numba prunes the branches they
+    decide before typing them: the DP5 kernel holds no RKN4 code, the paper's chain (``general`` False)
+    none of the real contacts' (a static load, damping and the dissipated power: see
+    ``forces.accelerations``). The scheme's constants are variables of this closure (Numba compiles
+    them as constants, and keys a closure's cache entry on their values); its functions are called as
+    ``SCHEME.stages``, ``SCHEME.weights``, ..., where ``SCHEME`` is a global name that
+    :func:`_specialised` binds to the scheme's module for each kernel (a module or a compiled function
+    held in a closure variable would defeat Numba's cache: it keys the entry on the pickled variables,
+    and a compiled function pickles with an id of its process). One compiled function holds the step
+    loop and the set-up around it (:func:`padded_arrays` allocates its arrays): it is compiled, and
+    cached, only when a run uses it. The step loop used to be a
     function of its own, called by one wrapper per pair with the two as literal arguments; Numba
     typed and lowered every method's and model's branches of it (it does not prune on a literal
     argument) and LLVM optimised and compiled the loop's code a second time in the wrapper's library.
-    With a run-time ``method`` and ``general`` the loop cost DP5 ~6 % more per realisation, and one
+    With a run-time method and ``general`` the loop cost DP5 ~6 % more per realisation, and one
     force routine with a run-time test cost the paper's ensembles 10-20 % (same-run timings against
     granchain 0.4.0).
     """
+    kind = scheme.kind  # for the root searches (``dense.first_root``), which take it as a run-time value
+    lazy_dense = scheme.lazy_dense
+    separate_velocity_weights = scheme.separate_velocity_weights
+    end_in_stage = scheme.end_in_stage
+    velocity_forces = scheme.velocity_forces
+    evaluations = scheme.evaluations
+    exponent = pi_exponent(scheme)
 
-    @njit(**JIT)
-    @named(f"{'rkn4' if method == KIND_RKN4 else 'dp5'}_{'general' if general else 'paper'}")
     def kernel(record, model, run, state, out):
         """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
-        final state) with the Runge-Kutta ``method`` (``records.KIND_DP5``, or ``KIND_RKN4``: the
-        Runge-Kutta-Nystrom pair of ``rkn4``, same loop, step control and records; ``general`` True for
-        real contacts) and its step control ``steps`` (``records.Steps``, from ``record.params``: see
+        final state) with the Runge-Kutta method of the kernel's scheme (``general`` True for real
+        contacts) and the step control ``steps`` (``records.Steps``, from ``record.params``: see
         :func:`unpack_steps`), recording into ``out`` (``records.Outputs``) what ``run`` asks
         (``records.Run``).
 
@@ -272,8 +281,7 @@ def rk_kernel(method, general):
         # The window: granules lo..hi-1 are integrated (lo = 0 until a trailing-window cut). Kx, Kv are
         # window-local (shifted to start at lo at each cut); the other arrays are read through views from
         # granule lo on, taken in the step loop below.
-        QV = Qv if method == KIND_RKN4 else Q  # velocity weights (see dense.weights)
-        alpha = ALPHA_RKN4 if method == KIND_RKN4 else ALPHA  # PI controller exponent of the error estimate
+        QV = Qv if separate_velocity_weights else Q  # velocity weights (the scheme's ``weights``)
         goal = relax_lag > 0 or window_lag > 0
         damped = general and p.gamma > 0.0
         # Thornton's contacts: each one's largest overlap (hist) is state, moved after every accepted step, and
@@ -325,9 +333,9 @@ def rk_kernel(method, general):
             # routines that look for its last granule).
             X, V, C, IM = x[lo:], v[lo:], c[lo:], inv_m[lo:]
             XS, VS = xs[lo:], vs[lo:]
-            # The velocities at a step's end: DP5's last stage, RKN4's new solution (the same numbers, which
-            # RKN4 copies into Kx[6] only with its dense output).
-            VE = VS if method == KIND_RKN4 else Kx[6]
+            # The velocities at a step's end: the last stage (DP5) or the new solution (RKN4: the same
+            # numbers, which it copies into Kx[6] only with its dense output).
+            VE = Kx[6] if end_in_stage else VS
             XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
             OP = op[lo:]
             H, DY = hist[lo:], dy[lo:]
@@ -346,26 +354,25 @@ def rk_kernel(method, general):
                 hp = padded_width(hw)
                 # The stages (DP5: 2..7, RKN4: 1..3; the last is the new solution's, reused as the first
                 # next step).
-                if method == KIND_RKN4:
-                    rkn4.stages(X, V, Kv, XS, VS, h, hp, FM, F, general)
-                    n_eval += 3
-                else:
-                    dp5.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F, Pd, general)
-                    n_eval += 6
+                SCHEME.stages(X, V, Kx, Kv, XS, VS, h, hp, FM, F, Pd, general)
+                n_eval += evaluations
                 # xs, vs now hold the new solution at t + h (DP5: 5th order; RKN4: 4th order).
                 accept = True
                 err = 0.0
                 if h_fixed <= 0.0:
-                    err = error_norm(method, X, V, XS, VS, Kx, Kv, h, hp, relaxed, steps, ratio)
-                    if damped:
-                        err = max(err, dp5.dissipated_error_ratio(Pd, h, dissipated, steps.rtol, steps.atol))
+                    SCHEME.error_ratios(X, V, XS, VS, Kx, Kv, h, hp, relaxed, steps.relaxed_factor, steps.rtol, steps.atol,
+                                        ratio)
+                    err = max_ratio(ratio, hp)
+                    if velocity_forces:  # (a constant: the branch is not compiled for the other schemes)
+                        if damped:
+                            err = max(err, SCHEME.dissipated_error_ratio(Pd, h, dissipated, steps.rtol, steps.atol))
                     if not math.isfinite(err):
                         status = NONFINITE
                         break
                     accept = err <= 1.0
                 if not accept:
                     n_rej += 1
-                    h *= max(MIN_FACTOR, SAFETY * err**-alpha)
+                    h *= max(MIN_FACTOR, SAFETY * err**-exponent)
                     if h < 1e-14 * max(1.0, t):
                         status = STEP_UNDERFLOW
                     continue
@@ -378,8 +385,8 @@ def rk_kernel(method, general):
                         w0 = Kx[0, j] - Kx[0, j + 1]
                         w1 = VE[j] - VE[j + 1]
                         if falls(w0, w1):
-                            theta = first_root(method, ROOT_APPROACH, j, (w0, w1), Dense(X, V, Kx, Kv, h), FM, Q, QV)
-                            weights(method, theta, Q, QV)
+                            theta = first_root(kind, ROOT_APPROACH, j, (w0, w1), Dense(X, V, Kx, Kv, h), FM, Q, QV)
+                            SCHEME.weights(theta, Q, QV)
                             top = OP[j] + dense_compression(j, X, Kx, h, Q)
                             if top > H[j] + HISTORY_RTOL * DY[j] and theta < turn:
                                 turn = theta
@@ -388,11 +395,11 @@ def rk_kernel(method, general):
                         h *= turn
                         continue
 
-                # Accepted: peaks and grid samples from the dense output over [t, t + h]. RKN4 lays its
-                # dense output into the stage arrays only when a step needs it (a root or a grid sample;
-                # laid out every step, it cost 16 % of an N = 26 decorated chain's time); until then
-                # its step's end is in Kv[6] (``rkn4.stages``) and VS. DP5's dense output is its stages.
-                dense_ready = method != KIND_RKN4
+                # Accepted: peaks and grid samples from the dense output over [t, t + h]. A lazy scheme (RKN4)
+                # lays its dense output into the stage arrays only when a step needs it (a root or a grid
+                # sample; laid out every step, it cost RKN4 16 % of an N = 26 decorated chain's time); until
+                # then its step's end is in Kv[6] and VS. DP5's dense output is its stages.
+                dense_ready = not lazy_dense
                 step = Dense(X, V, Kx, Kv, h)
                 # Velocity maxima where an acceleration goes from + to -: a vectorised count over every
                 # granule of the window (zeros past it) first; the loop over the observed granules runs
@@ -406,10 +413,10 @@ def rk_kernel(method, general):
                     a1 = Kv[6, k]
                     if falls(a0, a1):
                         if not dense_ready:
-                            rkn4.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+                            SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
                             dense_ready = True
-                        theta = first_root(method, ROOT_ACCELERATION, k, (a0, a1), step, FM, Q, QV)
-                        weights(method, theta, Q, QV)
+                        theta = first_root(kind, ROOT_ACCELERATION, k, (a0, a1), step, FM, Q, QV)
+                        SCHEME.weights(theta, Q, QV)
                         vpk = dense_value(V[k], Kv, k, h, QV)
                         if is_new_peak(vpk, peak_v[q], peak_rtol):
                             peak_v[q] = vpk
@@ -426,8 +433,8 @@ def rk_kernel(method, general):
                         r0 = force_rate(OP[j] + (X[j] - X[j + 1]), Kx[0, j] - Kx[0, j + 1], Kv[0, j] - Kv[0, j + 1], C[j], p)
                         r1 = force_rate(OP[j] + (XS[j] - XS[j + 1]), Kx[6, j] - Kx[6, j + 1], Kv[6, j] - Kv[6, j + 1], C[j], p)
                         if falls(r0, r1):
-                            theta = first_root(method, ROOT_FORCE_RATE, j, (r0, r1), step, FM, Q, QV)
-                            weights(method, theta, Q, QV)
+                            theta = first_root(kind, ROOT_FORCE_RATE, j, (r0, r1), step, FM, Q, QV)
+                            SCHEME.weights(theta, Q, QV)
                             fp = dense_force(j, step, FM, Q, QV)
                             if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
                                 peak_f[lo + j] = fp
@@ -446,10 +453,10 @@ def rk_kernel(method, general):
                         if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
                             continue
                         if not dense_ready:
-                            rkn4.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+                            SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
                             dense_ready = True
-                        theta = first_root(method, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
-                        weights(method, theta, Q, QV)
+                        theta = first_root(kind, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
+                        SCHEME.weights(theta, Q, QV)
                         dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
                         if plastic:  # Thornton's force: the history moved by this step is not yet in H
                             fp = plastic_force(dp, H[j], C[j], DY[j])
@@ -460,10 +467,10 @@ def rk_kernel(method, general):
                             peak_ft[lo + j] = t + theta * h
                             peak_d[lo + j] = dp
                 if not dense_ready and g < n_grid and t_grid[g] <= t + h:
-                    rkn4.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+                    SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
                 while g < n_grid and t_grid[g] <= t + h:
                     theta = (t_grid[g] - t) / h
-                    weights(method, theta, Q, QV)
+                    SCHEME.weights(theta, Q, QV)
                     for q in range(n_obs):
                         k = obs[q] - lo
                         if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
@@ -487,9 +494,10 @@ def rk_kernel(method, general):
                 if plastic:  # the loading branch moves each contact's history
                     for j in range(hw - 1):
                         H[j] = max(H[j], OP[j] + (X[j] - X[j + 1]))
-                if damped:
-                    dissipated += dp5.dissipated(Pd, h)
-                    Pd[0] = Pd[6]
+                if velocity_forces:
+                    if damped:
+                        dissipated += SCHEME.dissipated(Pd, h)
+                        Pd[0] = Pd[6]
                 t = t + h if not last else t_stop
                 n_acc += 1
                 if h_fixed > 0.0 and not is_finite_window(X, V, hw):  # adaptive: checked in the error norm
@@ -558,7 +566,7 @@ def rk_kernel(method, general):
                     break
 
                 if h_fixed <= 0.0:
-                    fac = SAFETY * max(err, 1e-10) ** -alpha * err_old**BETA
+                    fac = SAFETY * max(err, 1e-10) ** -exponent * err_old**BETA
                     fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
                     h *= fac
                     err_old = max(err, 1e-4)
@@ -587,4 +595,17 @@ def rk_kernel(method, general):
             v0[i] = vp[i]
         return status
 
-    return kernel
+    return njit(**JIT)(named(f"{scheme.name}_{'general' if general else 'paper'}")(_specialised(kernel, scheme)))
+
+
+def _specialised(kernel, scheme):
+    """``kernel`` with its global name ``SCHEME`` bound to ``scheme.module``: a copy of the function whose
+    code reads that name as ``_scheme_<name>``, a global of this module set here (the function keeps this
+    module's globals, so what tests patch here it sees)."""
+    alias = f"_scheme_{scheme.name}"
+    globals()[alias] = scheme.module
+    code = kernel.__code__
+    code = code.replace(co_names=tuple(alias if name == "SCHEME" else name for name in code.co_names))
+    bound = types.FunctionType(code, kernel.__globals__, kernel.__name__, kernel.__defaults__, kernel.__closure__)
+    bound.__qualname__, bound.__doc__, bound.__module__ = kernel.__qualname__, kernel.__doc__, kernel.__module__
+    return bound

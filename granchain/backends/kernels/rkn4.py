@@ -1,8 +1,8 @@
 """Runge-Kutta-Nystrom 4(3) for x'' = f(x): the stages, error estimate and dense output of the
 embedded pair "RKN4(3)4FM" of J. R. Dormand, M. E. A. El-Mikkawy and P. J. Prince, IMA J. Numer.
 Anal. 7, 235 (1987) (the same tables as ``DPRKN4`` of Julia's OrdinaryDiffEq). The step loop,
-peaks, window and records are DP5's (``rkloop``, ``KIND_RKN4``); this module only supplies what
-differs.
+peaks, window and records are DP5's (``rkloop``, specialised on this module's scheme: ``schemes``);
+this module only supplies what differs.
 
 Why a Nystrom pair for granular chains: the equation of motion (Eq. motion_rescaled) is second
 order with forces that do not depend on velocities, and a decorated chain's step is limited by the
@@ -33,7 +33,20 @@ from numba import njit
 from .forces import accelerations
 from .jit import JIT_INLINE, JIT_INTERNAL
 
+# The scheme's constants (``schemes.Scheme``: what the generic step loop ``rkloop`` is specialised on).
 ORDER = 4
+#: The embedded error estimate is O(h^4) (4th- minus 3rd-order solution): the PI controller's exponent.
+ERROR_ORDER = 4
+#: Force evaluations per step (stages 1..3; the last is the next step's first).
+EVALUATIONS = 3
+#: The dense output is laid out (:func:`dense_data`) only for the steps that read it.
+LAZY_DENSE = True
+#: Positions and velocities have their own dense-output weights (:func:`weights`).
+SEPARATE_VELOCITY_WEIGHTS = True
+#: The step's end velocities are in ``vs`` (copied into Kx[6] only with the dense output).
+END_IN_STAGE = False
+#: A method for x'' = f(x): the forces may not read velocities, and nothing is dissipated.
+VELOCITY_FORCES = False
 
 # Nodes and coupling (a_sj) of stages 1 and 2; stage 3 uses the position weights (c_3 = 1).
 C1, C2 = 1 / 4, 7 / 10
@@ -50,11 +63,12 @@ LAST = 3
 
 
 @njit(**JIT_INLINE)
-def stages(x, v, Kv, xs, vs, h, hi, fm, F, general):
+def stages(x, v, Kx, Kv, xs, vs, h, hi, fm, F, Pd, general):
     """Stages 1..3 of one step over granules 0..hi-1 (``Kv[0]`` holds f(x)); on return ``xs``, ``vs``
     hold the new state and ``Kv[3]`` the force per mass there (three force evaluations), also copied
     to ``Kv[6]``, where the step loop reads a step's end (as DP5's last stage; slot 3 is then free for
-    the dense output, which :func:`dense_data` lays out only for the steps that need it)."""
+    the dense output, which :func:`dense_data` lays out only for the steps that need it). ``Kx`` and
+    ``Pd`` are not read (every scheme's stages take the same arguments: ``schemes``)."""
     h2 = h * h
     for s in range(1, 4):  # one call of the force routine below, so that it is inlined once
         if s == 1:
@@ -73,10 +87,10 @@ def stages(x, v, Kv, xs, vs, h, hi, fm, F, general):
 
 
 @njit(**JIT_INLINE)
-def error_ratios(x, v, xs, vs, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
+def error_ratios(x, v, xs, vs, Kx, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
     """|embedded error| / (w_i (atol + rtol max(|y|, |y_new|))) of positions (ratio[0:hi]) and
     velocities (ratio[hi:2 hi]), w_i = ``factor`` in the relaxed zone (granules 0..relaxed-1), else 1
-    (as ``dp5.error_ratios``; ``rkloop.error_norm`` takes their maximum)."""
+    (as ``dp5.error_ratios``; ``rkloop.max_ratio`` takes their maximum). ``Kx`` is not read."""
     h2 = h * h
     for i in range(hi):
         w = factor if i < relaxed else 1.0
@@ -93,7 +107,7 @@ def error_ratios(x, v, xs, vs, Kv, h, hi, relaxed, factor, rtol, atol, ratio):
 def dense_data(x, v, xs, vs, Kx, Kv, h, hi):
     """After an accepted step that needs its dense output (a root or a grid sample in it): the quintic
     Hermite interpolant through (x, v, a = Kv[0]) and (xs, vs, a' = Kv[3]) in the slots of the stage
-    arrays, for :func:`hermite_weights`:
+    arrays, for :func:`weights`:
 
     Kx = [v, (x' - x)/h, h a, h a', 0, 0, v'], so that x(t + theta h) = x + h sum_s Kx[s] Qx[s];
     Kv = [a, (x' - x)/h^2, v/h, v'/h, *, *, a'], so that v(t + theta h) = v + h sum_s Kv[s] Qv[s].
@@ -117,7 +131,7 @@ def dense_data(x, v, xs, vs, Kx, Kv, h, hi):
 
 
 @njit(**JIT_INTERNAL)
-def hermite_weights(theta, Qx, Qv):
+def weights(theta, Qx, Qv):
     """Weights of :func:`dense_data` at t + theta h: the quintic Hermite basis (value at 0 and at 1,
     slope at 0 and at 1, curvature at 0 and at 1) and its derivative."""
     t = theta
