@@ -71,10 +71,15 @@ def _write_top_level_api() -> None:
         ".. currentmodule:: granchain",
         "",
     ]
+    from granchain.solve.integrators import AdaptiveRK
+
     for name in sorted(granchain.__all__, key=str.lower):
         obj = getattr(granchain, name)
         if inspect.isclass(obj):
-            lines += [f".. autoclass:: {name}", "   :members:", ""]
+            lines += [f".. autoclass:: {name}", "   :members:"]
+            if issubclass(obj, AdaptiveRK):  # DP5, RKN4: their step control and goal-oriented constructors are the base's
+                lines += ["   :inherited-members: Integrator"]
+            lines += [""]
         elif callable(obj):
             lines += [f".. autofunction:: {name}", ""]
         else:

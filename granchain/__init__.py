@@ -6,6 +6,7 @@ The founding reference is U. Harbola, A. Rosas, A. H. Romero and K. Lindenberg,
 
 from ._version import __version__
 from .model.chain import Chain, decorated, from_radii, monodisperse, regular_decorated, sphere_stiffness, tapered, wall_stiffness
+from .model.chainmodel import ChainModel
 from .model.contacts import ElasticPlastic, PowerLaw, Precompression, Striker, Viscoelastic, Viscous
 from .model.distributions import Mixture, Truncated, Uniform, as_distribution, small_radius_distribution
 from .model.effective import effective, effective_parameters
@@ -45,6 +46,7 @@ from .units import Material, Scale, scale, to_physical  # physical units; the re
 __all__ = [
     "BinaryRandom",
     "Chain",
+    "ChainModel",
     "ChainFamily",
     "CustomFamily",
     "DOP853",

@@ -208,7 +208,7 @@ class Backend:
         raise NotImplementedError
 
     def run_batch(self, integrator, batch, buffers: dict, *, t_grid, t_max, controls, scale: float = 1.0,
-                  model: dict | None = None, pulse_end=None) -> None:
+                  model=None, pulse_end=None) -> None:
         """Run ``integrator`` on every row of ``batch`` (a ``granchain.families.ChainBatch``: the rows'
         masses, stiffnesses and initial velocities, the observed granules and the contacts whose peak forces
         are recorded) into ``buffers``, arrays named as the results' schema names them (per row
@@ -216,8 +216,8 @@ class Backend:
         ``n_steps``, ``t_end``, and ``peak_wall_force``, ``peak_wall_force_time``, ``dissipated_energy``
         where the chains have them; the fixed-point sums ``sum_v``, ``sum_v2``, ``sum_wall``, ``n_valid``,
         and ``lags``, ``sum_a``, ``sum_a2`` for the aligned pulse: ``granchain.ensembles.run.chunk_buffers``
-        builds them from the schema). ``model``: what the rows share besides their arrays (``Chain``
-        keywords; None: the paper's chain). The batch seam of the ensembles and the design evaluator; a
+        builds them from the schema). ``model``: what the rows share besides their arrays (a
+        :class:`granchain.ChainModel`; None: the paper's chain). The batch seam of the ensembles and the design evaluator; a
         backend implements :meth:`integrate_batch`, which this calls with the batch's arrays (C-contiguous
         and writable: read-only arrays would make Numba compile its kernels again for them)."""
 
@@ -230,7 +230,7 @@ class Backend:
                              scale=scale, out=buffers, model=model, pulse_end=pulse_end)
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls, scale: float, out: dict, model: dict | None = None, pulse_end=None) -> None:
+                        controls, scale: float, out: dict, model=None, pulse_end=None) -> None:
         """A batch of chains (``Integrator.integrate_batch``), one :meth:`integrate` at a time.
         ``pulse_end`` is not read: it bounds the trailing window, and the integrators run here have none."""
         from .kernels.aligned import accumulate_aligned
@@ -289,12 +289,14 @@ def history_state(chain) -> dict:
     return {"history": np.array(chain.yield_overlaps(), dtype=float)}
 
 
-def batch_chain(masses, stiffness, n, initial_velocity, observed, model: dict | None = None):
+def batch_chain(masses, stiffness, n, initial_velocity, observed, model=None):
     """The :class:`granchain.Chain` of one row of a batch: its arrays, and the model the rows share
-    (``model``: the ``Chain`` keywords ``contact``, ``static_force``, ``striker``; None: the paper's)."""
+    (``model``: a :class:`granchain.ChainModel`, or a dict of the ``Chain`` keywords ``contact``,
+    ``static_force``, ``striker``; None: the paper's)."""
     from ..model.chain import Chain
 
-    return Chain(masses, stiffness, n, initial_velocity, observed, **(model or {}))
+    keywords = model if model is None or isinstance(model, dict) else model.chain_keywords(n)
+    return Chain(masses, stiffness, n, initial_velocity, observed, **(keywords or {}))
 
 
 def aligned_outputs(out: dict, n_observed: int):

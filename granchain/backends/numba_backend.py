@@ -151,7 +151,7 @@ class NumbaBackend(Backend):
         return int(status), out.info, out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f, out.grid_c
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls, scale: float, out: dict, model: dict | None = None, pulse_end=None) -> None:
+                        controls, scale: float, out: dict, model=None, pulse_end=None) -> None:
         import numba
 
         integrator.check_chains(masses, stiffness, n, initial_velocity)

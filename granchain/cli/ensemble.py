@@ -274,7 +274,7 @@ def run(args) -> int:
 
         integrator = stored_integrators(args.out)  # a store is continued with the integrators it was started with
     if integrator is None:
-        integrator = build_integrator(args, family.chains if chains == "both" else chains, family.contact_law.conservative)
+        integrator = build_integrator(args, family.chains if chains == "both" else chains, family.model.conservative)
     client = connect(args.scheduler)
     try:
         ds = run_ensemble(

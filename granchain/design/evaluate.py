@@ -21,6 +21,7 @@ import numpy as np
 
 from ..backends import batch_chain
 from ..ensembles.run import ensemble_integrator
+from ..model.chainmodel import ChainModel
 from ..solve.integrators import DP5, RunControls, get_integrator
 from ..solve.simulation import simulate, time_limit
 from .objectives import Objective, get_objective
@@ -42,10 +43,10 @@ class Evaluation:
     failed: np.ndarray
 
 
-def model_of(contact) -> dict | None:
-    """The ``model`` of ``Integrator.integrate_batch`` for a design run whose chains have the contact law
-    ``contact`` (None: the paper's elastic contacts)."""
-    return None if contact is None else {"contact": contact, "static_force": 0.0, "striker": False}
+def model_of(contact) -> ChainModel | None:
+    """The ``model`` of ``Backend.run_batch`` for a design run whose chains have the contact law ``contact``
+    (None: the paper's elastic contacts)."""
+    return None if contact is None else ChainModel(contact)
 
 
 def run_rows(batch, integrator, contacts, backend=None, contact=None) -> dict:

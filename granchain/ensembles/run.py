@@ -190,7 +190,7 @@ class EnsembleSpec:
             per_chain = {c: get_integrator(self.chain_integrators[c]) for c in self.chains}
         else:
             given = self.integrator
-            conservative = self.family.contact_law.conservative
+            conservative = self.family.model.conservative
             windowed = self.pulse_window == AUTO
             per_chain = {c: (get_integrator(given) if given is not None
                              else ensemble_integrator(c, conservative=conservative, windowed=windowed))
@@ -446,7 +446,7 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
             t_max = np.maximum(np.minimum(rows, 2.0 * crossing + 20.0), float(spec.t_grid[-1]))
         _run_batch(
             spec, name, batch, {**{k: a[ci] for k, a in buffers.items()}, "lags": spec.lags},
-            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, model=family.model(),
+            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, model=None if family.elastic else family.model,
             pulse_end=_window.keep_until(spec.pulse_ends[name]) if spec.pulse_ends and name in spec.pulse_ends else None,
         )
     out = {"chunk": j, "realizations": idx.size, **params}
@@ -718,7 +718,7 @@ def _compile_ahead(spec: EnsembleSpec, client):
     order it uses them (``Backend.prepare``: the Numba backend compiles DP5 in a helper process while this
     one compiles RKN4, the paper's defaults); (None, None) with a cluster, whose workers compile for
     themselves, for real contacts (other entry points) and on a chosen backend."""
-    if client is not None or spec.family.model() is not None or spec.backend is not None:
+    if client is not None or not spec.family.elastic or spec.backend is not None:
         return None, None
     from ..backends import get_backend
 

@@ -99,7 +99,7 @@ DISSIPATION = (
 def result_variables(family) -> tuple:
     """The per-realisation results a family's store holds: :data:`RESULTS`, :data:`FORCES`, and
     :data:`WALL` when its chains end in a wall."""
-    return RESULTS + FORCES + (WALL if family.wall else ()) + (DISSIPATION if family.contact_law.dissipates else ())
+    return RESULTS + FORCES + (WALL if family.model.wall else ()) + (DISSIPATION if family.model.dissipates else ())
 
 
 def per_realisation_variables(family) -> tuple:

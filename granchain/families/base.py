@@ -3,8 +3,9 @@
 :class:`ChainFamily` is the base class the ensemble runner, the store, the readers and the figures
 see: the one seam for a new kind of random chain (the concrete families live in
 ``decorated_families``, ``radii_families`` and ``custom``). It also holds what every family
-shares: the real contacts (contact law, static load, striker) and how they enter a record, a batch
-and a single chain; the wall's record; drawing a batch of realisations from
+shares: its physics as one value, ``family.model`` (a :class:`granchain.ChainModel`: contact law, static
+load, striker, wall), and how it enters a record, a batch and a single chain; drawing a batch of
+realisations from
 ``realization_rng(seed, i)``; the default time grid. :class:`RandomParameter` describes one
 per-realisation random parameter as the store holds it.
 """
@@ -19,7 +20,7 @@ import numpy as np
 
 from .._validate import finite_scalar
 from ..model.chain import Chain
-from ..model.contacts import ContactLaw, PowerLaw, Precompression
+from ..model.chainmodel import ChainModel
 from ..model.random import realization_rng
 from .batch import ChainBatch, _add_striker
 
@@ -51,77 +52,59 @@ class ChainFamily:
     :meth:`build`, :meth:`chain`, :meth:`describe` and the properties :attr:`chains`,
     :attr:`size`, :attr:`n_observed` and :meth:`granule_coordinate`.
 
-    The real contacts the chains share (the concrete families have these fields): ``contact``, the
-    contact law (None: ``PowerLaw(n)``, the paper's; or another ``granchain.model.contacts.ContactLaw``),
-    ``static_force`` (the precompression F0, 0: none) and ``striker_mass`` (None: granule 1 struck
-    with velocity 1; else a free sphere of that mass, rescaled, struck instead, one material).
+    The chains' physics is one value, the field ``model`` (a :class:`granchain.ChainModel`): the contact
+    law (None: ``PowerLaw(n)``, the paper's; or another ``granchain.model.contacts.ContactLaw``), the static
+    load (the precompression F0, 0: none), the striker (None: granule 1 struck with velocity 1; else a free
+    sphere of that mass, rescaled, struck instead, one material) and the wall. The concrete families also
+    take its parts as keywords (``contact``, ``static_force``, ``striker_mass``, ``wall``) and keep them as
+    fields, read from the model.
     """
 
     kind: ClassVar[str]
     n: float
-    wall: bool = False  # (a class default; the concrete families have a ``wall`` field)
+    wall: bool = False  # (class defaults; the concrete families have these fields)
     contact: object = None
     static_force: float = 0.0
     striker_mass: float | None = None
+    model: ChainModel | None = None
 
-    # -- real contacts --------------------------------------------------------------------
+    # -- the chains' physics --------------------------------------------------------------
     def _validate_model(self) -> None:
-        law = self.contact
-        if law is not None:
-            if not isinstance(law, ContactLaw):
-                raise ValueError(f"contact must be a contact law (granchain.PowerLaw, granchain.Viscoelastic, ...: a "
-                                 f"granchain.model.contacts.ContactLaw) or None, got {law!r}")
-            if law.n != self.n:
-                raise ValueError(f"the contact law's exponent n = {law.n:g} differs from the family's n = {self.n:g}: give the same n")
-            if isinstance(law, PowerLaw):
-                law = None  # the default, recorded as such (stores of the paper's chain keep their record)
-        object.__setattr__(self, "contact", law)
-        force = Precompression(self.static_force).force
-        if force > 0 and self.n <= 1.0:
-            raise ValueError(f"precompression needs an exponent n > 1, got n = {self.n:g}")
-        object.__setattr__(self, "static_force", force)
-        if self.striker_mass is not None:
-            object.__setattr__(self, "striker_mass", finite_scalar("striker_mass", self.striker_mass, positive=True))
+        """Make ``model`` the family's :class:`granchain.ChainModel` (checked for its exponent n) from ``model=``
+        and the keywords ``contact``, ``static_force``, ``striker_mass``, ``wall``: a keyword left at its default
+        takes the model's value; one given with another value than the model's is refused."""
+        keywords = ChainModel(self.contact, self.static_force, self.striker_mass, self.wall).for_exponent(self.n)
+        model = keywords
+        if self.model is not None:
+            if not isinstance(self.model, ChainModel):
+                raise ValueError(f"model must be a granchain.ChainModel (contact law, static load, striker, wall) or None, "
+                                 f"got {self.model!r}")
+            model = self.model.for_exponent(self.n)
+            default = ChainModel()
+            clash = [name for name in ("contact", "static_force", "striker_mass", "wall")
+                     if getattr(keywords, name) != getattr(default, name) and getattr(keywords, name) != getattr(model, name)]
+            if clash:
+                raise ValueError(f"{type(self).__name__} got {', '.join(clash)} both in model= and as keywords, with other "
+                                 "values: give each once")
+        for name in ("contact", "static_force", "striker_mass", "wall"):
+            object.__setattr__(self, name, getattr(model, name))
+        object.__setattr__(self, "model", model)
 
     @property
     def contact_law(self):
-        """The chains' contact law (``PowerLaw(n)`` unless a viscoelastic one was given)."""
-        return PowerLaw(self.n) if self.contact is None else self.contact
+        """The chains' contact law (``PowerLaw(n)`` unless another one was given)."""
+        return self.model.law(self.n)
 
     @property
     def elastic(self) -> bool:
         """The paper's contacts: no damping, no static load, no striker."""
-        return self.contact is None and self.static_force == 0.0 and self.striker_mass is None
+        return self.model.elastic
 
-    def model(self) -> dict | None:
-        """What the chains share besides their arrays, as :class:`granchain.Chain` keywords (the
-        ``model`` of ``Integrator.integrate_batch``); None for the paper's chains."""
-        if self.elastic:
-            return None
-        return {"contact": self.contact_law, "static_force": self.static_force, "striker": self.striker_mass is not None}
-
-    def _with_model(self, record: dict) -> dict:
-        """A :meth:`describe` record with the real contacts that differ from the paper's (records of the
+    def _recorded(self, record: dict) -> dict:
+        """A :meth:`describe` record with the model's parts that differ from the paper's chain (records of the
         paper's chains stay as before, so their stores resume unchanged; a store resumed with other
         contact settings is refused with the difference)."""
-        extra = {}
-        if self.contact is not None:
-            extra["contact"] = self.contact.describe()
-        if self.static_force > 0:
-            extra["static_force"] = self.static_force
-        if self.striker_mass is not None:
-            extra["striker_mass"] = self.striker_mass
-        return {**record, **extra}
-
-    def _model_label(self) -> str:
-        parts = []
-        if self.contact is not None:
-            parts.append(self.contact.label(4))
-        if self.static_force > 0:
-            parts.append(f"precompressed F0 = {self.static_force:.4g}")
-        if self.striker_mass is not None:
-            parts.append(f"striker of mass {self.striker_mass:.4g}")
-        return (", " + ", ".join(parts)) if parts else ""
+        return {**record, **self.model.record()}
 
     def _model_batch(self, batch: ChainBatch, first_radius) -> ChainBatch:
         """The batch with the family's striker (before its wall, if any: call this first)."""
@@ -129,11 +112,7 @@ class ChainFamily:
 
     def _model_chain(self, chain: Chain) -> Chain:
         """One chain with the family's real contacts (bitwise a row of :meth:`build`)."""
-        if self.striker_mass is not None:
-            chain = chain.with_striker(mass=self.striker_mass)
-        if self.contact is not None or self.static_force > 0:
-            chain = chain.replace(contact=self.contact_law, static_force=self.static_force)
-        return chain
+        return self.model.apply(chain)
 
     # -- what the family is -------------------------------------------------------------
     @property
@@ -164,14 +143,6 @@ class ChainFamily:
     def contact_coordinate(self) -> tuple:
         """(values, long_name) of the store's ``contact`` coordinate."""
         return np.arange(1, self.n_contacts + 1), "contact q between granules q and q+1 (1-based; every contact)"
-
-    def _walled(self, record: dict) -> dict:
-        """A :meth:`describe` record with ``"wall": True`` for a family with a wall (free-end records
-        stay as before, so stores written without the option resume unchanged)."""
-        return {**record, "wall": True} if self.wall else record
-
-    def _wall_label(self) -> str:
-        return ", against a fixed wall" if self.wall else ""
 
     def parameters(self) -> tuple:
         """The :class:`granchain.families.RandomParameter` records of what :meth:`draw` returns."""

@@ -16,6 +16,7 @@ import numpy as np
 
 from .._validate import exponent
 from ..model.chain import HERTZ, Chain, from_radii, sphere_mass, sphere_stiffness
+from ..model.chainmodel import ChainModel
 from ..model.random import realization_rng
 from .base import _RADIUS_UNITS, ChainFamily, RandomParameter
 from .batch import ChainBatch, _stack
@@ -143,26 +144,22 @@ class CustomFamily(ChainFamily):
         return {"mass": ch.masses, "stiffness": ch.stiffness, "initial_velocity": ch.initial_velocity}
 
     @property
-    def contact_law(self):
-        return self._probe.contact
+    def model(self) -> ChainModel:
+        """The physics of the chains the function returns (that of the first call: every realisation must
+        have the same), as one value."""
+        return ChainModel.of_chain(self._probe)
+
+    @property
+    def contact(self):
+        return self.model.contact
 
     @property
     def static_force(self) -> float:
-        return self._probe.static_force
+        return self.model.static_force
 
     @property
     def striker_mass(self) -> float | None:
-        return float(self._probe.masses[0]) if self._probe.striker else None
-
-    @property
-    def elastic(self) -> bool:
-        return self._probe.elastic and not self._probe.striker
-
-    def model(self) -> dict | None:
-        """The real contacts of the chains the function returns (those of the first call: every
-        realisation must have the same)."""
-        p = self._probe
-        return None if self.elastic else {"contact": p.contact, "static_force": p.static_force, "striker": p.striker}
+        return self.model.striker_mass
 
     def build(self, params: dict, chain: str) -> ChainBatch:
         self._chain_name(chain)

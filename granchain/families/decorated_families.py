@@ -10,13 +10,14 @@ signature of granchain <= 0.4, whose second argument was the ratio of successive
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
 from .._validate import count, exponent, finite_scalar
 from ..model.chain import HERTZ, Chain, decorated, sphere_mass, sphere_stiffness
+from ..model.chainmodel import ChainModel
 from ..model.distributions import small_radius_distribution
 from ..model.effective import effective, effective_parameters
 from ..model.random import realization_rng
@@ -151,6 +152,7 @@ class RandomDecorated(_Decorated):
     contact: object = None
     static_force: float = 0.0
     striker_mass: float | None = None
+    model: ChainModel | None = field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "decorated"
 
@@ -161,13 +163,12 @@ class RandomDecorated(_Decorated):
         return np.ones(self.n_large)
 
     def describe(self) -> dict:
-        return self._with_model(self._walled({"family": self.kind, "n_large": self.n_large,
+        return self._recorded(({"family": self.kind, "n_large": self.n_large,
                                               "distribution": self.distribution.describe(), "n": self.n,
                                               "momentum_conserving": self.momentum_conserving}))
 
     def label(self) -> str:
-        return (f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}{self._wall_label()}"
-                f"{self._model_label()}")
+        return (f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}{self.model.label()}")
 
     def arrival_ratio(self) -> float:
         return 1.0
@@ -213,12 +214,13 @@ class TaperedDecorated(_Decorated):
     contact: object = None
     static_force: float = 0.0
     striker_mass: float | None = None
+    model: ChainModel | None = field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "tapered-decorated"
 
     def __init__(self, n_large: int = 26, *args, q: float | None = None, distribution=None, n: float = HERTZ,
                  momentum_conserving: bool = False, wall: bool = False, ratio: float | None = None, contact=None,
-                 static_force: float = 0.0, striker_mass: float | None = None):
+                 static_force: float = 0.0, striker_mass: float | None = None, model: ChainModel | None = None):
         if len(args) > 5:
             raise TypeError(f"TaperedDecorated takes at most 6 positional arguments, got {1 + len(args)}")
         if args:  # the signature of granchain <= 0.4: (n_large, ratio, distribution, n, momentum_conserving, wall)
@@ -239,7 +241,7 @@ class TaperedDecorated(_Decorated):
             q = _q_of_ratio(ratio)
         for name, value in (("n_large", n_large), ("q", 0.05 if q is None else q), ("distribution", distribution), ("n", n),
                             ("momentum_conserving", momentum_conserving), ("wall", wall), ("contact", contact),
-                            ("static_force", static_force), ("striker_mass", striker_mass)):
+                            ("static_force", static_force), ("striker_mass", striker_mass), ("model", model)):
             object.__setattr__(self, name, value)
         self.__post_init__()
 
@@ -259,10 +261,10 @@ class TaperedDecorated(_Decorated):
         return (1.0 - self.q) ** np.arange(self.n_large, dtype=float)
 
     def describe(self) -> dict:
-        return self._with_model(self._walled({"family": self.kind, "n_large": self.n_large, "q": self.q, "large_radii": _TAPER,
+        return self._recorded(({"family": self.kind, "n_large": self.n_large, "q": self.q, "large_radii": _TAPER,
                                               "distribution": self.distribution.describe(), "n": self.n,
                                               "momentum_conserving": self.momentum_conserving}))
 
     def label(self) -> str:
         return (f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}"
-                f"{self._wall_label()}{self._model_label()}")
+                f"{self.model.label()}")

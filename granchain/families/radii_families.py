@@ -7,13 +7,14 @@ from the drawn radii (masses R^3, stiffnesses of Eq. r-prime) with the same func
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
 from .._validate import count, exponent, finite_scalar
 from ..model.chain import HERTZ, Chain, from_radii, sphere_mass, sphere_stiffness
+from ..model.chainmodel import ChainModel
 from ..model.distributions import as_distribution
 from ..model.random import realization_rng
 from .base import _RADIUS_UNITS, ChainFamily, RandomParameter, _flag
@@ -67,6 +68,7 @@ class RandomRadii(_RadiiFamily):
     contact: object = None
     static_force: float = 0.0
     striker_mass: float | None = None
+    model: ChainModel | None = field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "polydisperse"
 
@@ -89,11 +91,11 @@ class RandomRadii(_RadiiFamily):
         return _stack(params, "radius")
 
     def describe(self) -> dict:
-        return self._with_model(self._walled({"family": self.kind, "size": self.size,
+        return self._recorded(({"family": self.kind, "size": self.size,
                                               "distribution": self.distribution.describe(), "n": self.n}))
 
     def label(self) -> str:
-        return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}{self._wall_label()}{self._model_label()}"
+        return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}{self.model.label()}"
 
 
 @dataclass(frozen=True)
@@ -111,6 +113,7 @@ class BinaryRandom(_RadiiFamily):
     contact: object = None
     static_force: float = 0.0
     striker_mass: float | None = None
+    model: ChainModel | None = field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "binary"
 
@@ -141,9 +144,8 @@ class BinaryRandom(_RadiiFamily):
         return np.where(species == 1, self.radii[1], self.radii[0]).astype(float)
 
     def describe(self) -> dict:
-        return self._with_model(self._walled({"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p,
+        return self._recorded(({"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p,
                                               "n": self.n}))
 
     def label(self) -> str:
-        return (f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}{self._wall_label()}"
-                f"{self._model_label()}")
+        return (f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}{self.model.label()}")

@@ -20,7 +20,7 @@ import os
 import warnings
 
 from ..model.chain import HERTZ
-from ..model.contacts import law_from_record
+from ..model.chainmodel import ChainModel
 from ..model.distributions import distribution_from_record
 from .base import ChainFamily
 from .custom import CustomFamily
@@ -38,40 +38,22 @@ def family_from_record(record: dict) -> ChainFamily:
     kind = record.pop("family", None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # warned about when the ensemble was made
-        wall = bool(record.get("wall", False))
-        model = _model_of_record(record)
+        model = ChainModel.from_record(record)
         if kind == RandomDecorated.kind:
             return RandomDecorated(record["n_large"], distribution_from_record(record["distribution"]), n=record["n"],
-                                   momentum_conserving=record["momentum_conserving"], wall=wall, **model)
+                                   momentum_conserving=record["momentum_conserving"], model=model)
         if kind == TaperedDecorated.kind:
             # records of granchain <= 0.4 hold the ratio of successive large radii under "q"
             q = record["q"] if record.get("large_radii") == _TAPER else _q_of_ratio(record["q"])
             return TaperedDecorated(record["n_large"], q=q, distribution=distribution_from_record(record["distribution"]),
-                                    n=record["n"], momentum_conserving=record["momentum_conserving"], wall=wall, **model)
+                                    n=record["n"], momentum_conserving=record["momentum_conserving"], model=model)
         if kind == RandomRadii.kind:
-            return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"], wall=wall,
-                               **model)
+            return RandomRadii(record["size"], distribution_from_record(record["distribution"]), n=record["n"], model=model)
         if kind == BinaryRandom.kind:
-            return BinaryRandom(record["size"], tuple(record["radii"]), record["p"], n=record["n"], wall=wall, **model)
+            return BinaryRandom(record["size"], tuple(record["radii"]), record["p"], n=record["n"], model=model)
     if kind == CustomFamily.kind:
         raise ValueError(f"a CustomFamily ({record.get('build')}) cannot be rebuilt from its record: pass the family itself")
     raise ValueError(f"unknown chain family {kind!r}; known: {sorted(FAMILIES)}")
-
-
-def _model_of_record(record: dict) -> dict:
-    """The real-contact keywords of a family record (:meth:`ChainFamily._with_model`; none in records
-    of the paper's chains)."""
-    out = {}
-    law = record.get("contact")
-    if law is not None:
-        # (records of the viscoelastic law written before its clamp option hold no "clamp": they were all
-        # clamped, its default)
-        out["contact"] = law_from_record(law)
-    if record.get("static_force"):
-        out["static_force"] = float(record["static_force"])
-    if record.get("striker_mass") is not None:
-        out["striker_mass"] = float(record["striker_mass"])
-    return out
 
 
 def current_family_record(record: dict) -> dict:

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import count, exponent, finite_scalar, positive_array
+from .chainmodel import ChainModel
 from .contacts import (MIN_DYNAMIC_RATIO, ContactLaw, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker,
                        Viscoelastic)
 
@@ -401,6 +402,28 @@ class Chain:
     def describe_model(self) -> dict:
         """The chain's contact law, static load and initial state as a record (for stores and reports)."""
         return {**self.contact.describe(), **self.precompression.describe(), **self.initial.describe()}
+
+    @property
+    def model(self) -> ChainModel:
+        """The chain's physics besides its arrays as one value (:class:`granchain.ChainModel`: contact law,
+        static load, striker mass, wall), the value a family of such chains shares."""
+        return ChainModel.of_chain(self)
+
+    def with_model(self, model: ChainModel) -> "Chain":
+        """This chain (struck on granule 1, the paper's contacts) with the physics of ``model``: its striker
+        in front of granule 1, its contact law and static load, and a wall (:meth:`with_wall`, default
+        stiffness) if the model has one and the chain has not. What a chain family does to each of its
+        chains."""
+        if not isinstance(model, ChainModel):
+            raise ValueError(f"model must be a granchain.ChainModel, got {model!r}")
+        if self.striker or not self.elastic:
+            raise ValueError("with_model starts from the paper's chain (no striker, power-law contacts, no static load); "
+                             "this chain already has its own: build it again without them")
+        if self.wall and not model.wall:
+            raise ValueError("the chain ends in a wall and the model has none: build the chain without its wall")
+        model = model.for_exponent(self.n)
+        chain = model.apply(self)
+        return chain.with_wall() if model.wall and not chain.wall else chain
 
     def __repr__(self) -> str:
         extras = ""

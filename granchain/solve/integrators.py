@@ -119,7 +119,7 @@ class Integrator:
                                                    stop_at_exit=stop_at_exit, controls=controls, sensed=sensed)
 
     def integrate_batch(self, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls: RunControls, scale: float, out: dict, model: dict | None = None,
+                        controls: RunControls, scale: float, out: dict, model=None,
                         pulse_end=None) -> None:
         """Integrate a batch of chains (rows of ``masses`` (R, M), ``stiffness`` (R, M-1),
         ``initial_velocity`` (R,), shared ``observed`` and recorded ``contacts``, 0-based),
@@ -134,8 +134,8 @@ class Integrator:
         the wall force to ``["sum_wall"]`` (T,)) and counts them in ``["n_valid"]`` (1,). With
         ``out["lags"]`` (L,), also adds the aligned pulse's sums to ``["sum_a"]``/``["sum_a2"]``
         (L, K) (``granchain.backends.kernels.aligned``). ``model``: what the rows share besides their
-        arrays, as keywords of :class:`granchain.Chain` (``contact``, ``static_force``, ``striker``;
-        None: the paper's elastic, unloaded chain struck on granule 1). ``t_max``: one time limit for all
+        arrays, a :class:`granchain.ChainModel` (or a dict of the :class:`granchain.Chain` keywords ``contact``,
+        ``static_force``, ``striker``; None: the paper's elastic, unloaded chain struck on granule 1). ``t_max``: one time limit for all
         rows, or one per row (R,). A precompressed batch runs to it (its contacts never open), the others
         stop at the pulse's exit. ``pulse_end`` (K,; None: never): per observed granule the end of its
         averaged-pulse window (``granchain.ensembles.pulse_window``): a trailing window does not drop the
@@ -336,8 +336,8 @@ class DP5(AdaptiveRK):
 @dataclass(frozen=True)
 class RKN4(AdaptiveRK):
     """Compiled adaptive Runge-Kutta-Nystrom 4(3) (Dormand, El-Mikkawy & Prince 1987, "RKN4(3)4FM"):
-    DP5's sibling (the same :class:`StepControl`, goal-oriented zones and records), with a method made
-    for x'' = f(x).
+    DP5's sibling (the same :class:`~granchain.solve.integrators.StepControl`, goal-oriented zones and
+    records), with a method made for x'' = f(x).
 
     Three force evaluations per step (DP5: six), order 4 with a 3rd-order error estimate, dense
     output by the quintic Hermite interpolant of the positions (``granchain.backends.kernels.rkn4``). A
@@ -346,8 +346,8 @@ class RKN4(AdaptiveRK):
     random N = 26 decorated chains it takes ~0.9x DP5's steps at half the force evaluations each.
     Its tolerances are not DP5's: at rtol 1e-5 its peak velocities are as accurate as DP5's at 1e-6
     (and more so at the free end of short chains), but its peak contact forces are not: they set its
-    tolerance (``goal_tolerances``), so ``RKN4.relaxed()`` and ``RKN4.windowed()`` (the siblings' own:
-    :meth:`AdaptiveRK.relaxed`, :meth:`AdaptiveRK.windowed`) take rtol 3e-6
+    tolerance (``goal_tolerances``), so ``RKN4.relaxed()`` and ``RKN4.windowed()`` (shared with DP5:
+    :meth:`DP5.relaxed`, :meth:`DP5.windowed`) take rtol 3e-6
     (the decorated ensembles' :func:`granchain.ensemble_integrator`; tests/test_window.py). For
     smooth chains (no light granules) it saves nothing over DP5 at equal accuracy.
     """

@@ -147,7 +147,7 @@ class CudaBackend(Backend):
                 res["peak_ft"][0], grid_f, np.zeros((t_grid.size, 0)))
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
-                        controls, scale: float, out: dict, model: dict | None = None, pulse_end=None) -> None:
+                        controls, scale: float, out: dict, model=None, pulse_end=None) -> None:
         from .. import aligned_outputs, batch_chain
 
         if out.get("lags") is not None:

@@ -23,7 +23,7 @@ called by name from the loop's code and inlined there. What a scheme's module pr
   the quadrature of the dissipated power over a step and its embedded error.
 
 A new method is a module with these, a :func:`scheme` line in :data:`SCHEMES`, its branch in
-:func:`dense_weights` and its integrator class (``granchain.solve.integrators``); the Numba backend and
+:func:`dense_weights` (and its kind in :data:`WEIGHTED_KINDS`) and its integrator class (``granchain.solve.integrators``); the Numba backend and
 the entry points (``dispatch``) read :data:`SCHEMES`.
 """
 
@@ -43,10 +43,17 @@ Scheme = namedtuple("Scheme", ["name", "kind", "module", "order", "error_order",
                                "separate_velocity_weights", "end_in_stage", "velocity_forces"])
 
 _FUNCTIONS = ("stages", "error_ratios", "dense_data", "weights")
+#: The kinds :func:`dense_weights` has a branch for.
+WEIGHTED_KINDS = (KIND_DP5, KIND_RKN4)
 
 
 def scheme(name: str, kind: int, module) -> Scheme:
-    """The scheme of ``module`` (checked: every constant and function of the module docstring)."""
+    """The scheme of ``module`` (checked: every constant and function of the module docstring, and a branch
+    of :func:`dense_weights` for its kind, without which its peaks would be located on another method's
+    dense output)."""
+    if kind not in WEIGHTED_KINDS:
+        raise TypeError(f"the Runge-Kutta scheme {name!r} has kind {kind}, which schemes.dense_weights has no branch "
+                        f"for (it has {WEIGHTED_KINDS}): add one, and the kind to WEIGHTED_KINDS")
     missing = [f for f in _FUNCTIONS + (("dissipated", "dissipated_error_ratio") if module.VELOCITY_FORCES else ())
                if not hasattr(module, f)]
     if missing:
