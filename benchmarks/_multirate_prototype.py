@@ -29,8 +29,10 @@ from numba import njit
 from granchain.backends.kernels import rkn4 as _rkn
 from granchain.backends.kernels.forces import POW_HERTZ, accelerations, contact_force
 from granchain.backends.kernels.records import Forces, Params
-from granchain.backends.kernels.rkloop import ALPHA_RKN4 as ALPHA
-from granchain.backends.kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY
+from granchain.backends.kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, pi_exponent
+from granchain.backends.kernels.schemes import RKN4
+
+ALPHA = pi_exponent(RKN4)  # RKN4(3)'s PI exponent, as in the step loop
 
 N = 2.5  # Hertz contacts, Eq. (motion_rescaled)
 #: The kernels' model record of an elastic, unloaded Hertz chain without a wall (records.Params).

@@ -43,7 +43,7 @@ from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
 # The method's tables, the step control's constants and the stop and window rules: the CPU kernels' own
 # numbers (one source; the GPU code below is the CPU's written for CUDA).
 from ..kernels import dense as _dense
-from ..kernels.rkloop import ALPHA_RKN4, BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN
+from ..kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN, pi_exponent
 from ..kernels.rkn4 import (
     A10,
     A20,
@@ -66,8 +66,12 @@ from ..kernels.rkn4 import (
     P2,
     P3,
 )
+from ..kernels.schemes import RKN4
 from ..kernels.stop import RATTLER_MASS_RATIO
 from ..kernels.window import CUT_FORCE
+
+#: The PI controller's exponent of RKN4(3)'s error estimate (the CPU step loop's, ``rkloop.pi_exponent``).
+ALPHA_RKN4 = pi_exponent(RKN4)
 
 FULL_MASK = 0xFFFFFFFF  # every lane of a warp (the shuffle exchange)
 
@@ -91,7 +95,7 @@ def contact_force(d, c, n):
 @cuda.jit(device=True)
 def hermite_x(x0, v0, a0, x1, v1, a1, h, t):
     """Position at theta = t on the quintic Hermite interpolant through (x, v, a) at both ends of a step
-    (``kernels.rkn4.hermite_weights``)."""
+    (``kernels.rkn4.weights``)."""
     t2 = t * t
     t3 = t2 * t
     t4 = t3 * t
