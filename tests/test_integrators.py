@@ -67,6 +67,40 @@ def test_registry():
     assert gc.get_integrator(custom) is custom
 
 
+def test_every_runge_kutta_scheme_has_its_integrator_and_the_other_way_round():
+    """The compiled step loop's schemes (``kernels.schemes``) and the adaptive integrators are one list: each
+    scheme is the method of a registered integrator of the same name and order (whose error estimate is one
+    order lower), run under a StepControl; DP5 and RKN4 are siblings, not parent and child."""
+    from granchain.backends.kernels.schemes import SCHEMES
+    from granchain.solve.integrators import AdaptiveRK, StepControl
+
+    adaptive = {name: cls for name, cls in gc.INTEGRATORS.items() if issubclass(cls, AdaptiveRK)}
+    assert {s.name for s in SCHEMES.values()} == set(adaptive) == {"dp5", "rkn4"}
+    for s in SCHEMES.values():
+        assert adaptive[s.name].order == s.order and s.error_order == s.order
+        integ = adaptive[s.name](rtol=1e-7, relaxed_lag=4)
+        assert integ.step_control == StepControl(rtol=1e-7, relaxed_lag=4) and integ.goal_oriented
+    assert not isinstance(gc.RKN4(), gc.DP5) and not isinstance(gc.DP5(), gc.RKN4)
+    assert gc.RKN4.windowed().describe()["rtol"] == 3e-6 and gc.DP5.windowed().describe()["rtol"] == 1e-6
+    with pytest.raises(ValueError, match="relaxed_factor"):
+        StepControl(relaxed_factor=0.5)
+
+
+def test_a_scheme_is_refused_without_its_parts():
+    """A scheme lacking one of the functions the step loop calls, or of a kind the root searches have no
+    dense output for (its peaks would be located on another method's), is refused when registered."""
+    import types
+
+    from granchain.backends.kernels import dp5, schemes
+
+    partial = types.SimpleNamespace(**{k: getattr(dp5, k) for k in dir(dp5) if k != "dense_data"})
+    with pytest.raises(TypeError, match="lacks \\['dense_data'\\]"):
+        schemes.scheme("partial", schemes.DP5.kind, partial)
+    with pytest.raises(TypeError, match="no branch"):
+        schemes.scheme("unknown", 99, dp5)
+    assert schemes.scheme("dp5", schemes.DP5.kind, dp5) == schemes.DP5
+
+
 @pytest.mark.parametrize("name", sorted(gc.INTEGRATORS))
 def test_convergence_order(name):
     chain, T, exact = harmonic_two_body()
