@@ -194,39 +194,21 @@ class StepControl:
 
 
 @dataclass(frozen=True)
-class AdaptiveRK(Integrator):
-    """Base of the compiled adaptive Runge-Kutta methods (:class:`DP5`, :class:`RKN4`): their settings are
-    a :class:`StepControl` (its fields, validated by it), their method a scheme of the compiled step loop
-    (``granchain.backends.kernels.schemes``, by the integrator's ``name``). Siblings share the step control,
-    the goal-oriented constructors :meth:`relaxed` and :meth:`windowed` and the records, nothing of each
-    other's method."""
-
-    rtol: float = 1e-8
-    atol: float = 1e-10
-    first_step: float = 1e-3
-    fixed_step: float | None = None
-    relaxed_lag: int | None = None
-    relaxed_factor: float = 1000.0
-    window_lag: int | None = None
+class AdaptiveRK(StepControl, Integrator):
+    """Base of the compiled adaptive Runge-Kutta methods (:class:`DP5`, :class:`RKN4`): a method (a scheme of
+    the compiled step loop, ``granchain.backends.kernels.schemes``, by the integrator's ``name``) under a
+    step control, whose fields and checks are :class:`StepControl`'s (:attr:`step_control` gives the value).
+    Siblings share the step control, the goal-oriented constructors :meth:`relaxed` and :meth:`windowed`
+    and the records, nothing of each other's method."""
 
     supports_goal_control: ClassVar[bool] = True
     #: The tolerances of :meth:`relaxed` and :meth:`windowed` (each method's own, validated).
     goal_tolerances: ClassVar[tuple]
 
-    def __post_init__(self):
-        control = StepControl(*(getattr(self, f.name) for f in dataclasses.fields(StepControl)))
-        for f in dataclasses.fields(StepControl):
-            object.__setattr__(self, f.name, getattr(control, f.name))
-
     @property
     def step_control(self) -> StepControl:
         """The integrator's :class:`StepControl` (its step-control fields, as one value)."""
         return StepControl(*(getattr(self, f.name) for f in dataclasses.fields(StepControl)))
-
-    @property
-    def is_exact(self) -> bool:
-        """True when every granule is integrated to the end with the full tolerance."""
-        return self.step_control.is_exact
 
     @property
     def goal_oriented(self) -> bool:
