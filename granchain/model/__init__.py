@@ -5,7 +5,7 @@
   (:class:`FreeEnd`, :class:`LoadedEnd`, :class:`FixedWall`) and the initial state (:class:`Impulse`,
   :class:`Striker`), small frozen values that declare the assumptions they license (forces depend on
   positions only, the granules ahead of the pulse are exactly at rest, the pulse leaves for good);
-- :mod:`~granchain.model.chainmodel`: :class:`~granchain.ChainModel`, the values above that a family of
+- ``granchain.model.chainmodel``: :class:`~granchain.ChainModel`, the values above that a family of
   chains shares (law, static load, striker, wall), as one value;
 - :mod:`~granchain.model.collision`: the two-body collision of the viscoelastic law (its coefficient
   of restitution, and the damping that gives one);

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from .._validate import finite_scalar
 from .contacts import ContactLaw, PowerLaw, Precompression
 
@@ -49,10 +51,9 @@ class ChainModel:
         object.__setattr__(self, "static_force", load.force)
         if self.striker_mass is not None:
             object.__setattr__(self, "striker_mass", finite_scalar("striker_mass", self.striker_mass, positive=True))
-        if not isinstance(self.wall, bool):
-            if type(self.wall).__name__ != "bool_":
-                raise ValueError(f"wall must be True or False, got {self.wall!r}")
-            object.__setattr__(self, "wall", bool(self.wall))
+        if not isinstance(self.wall, (bool, np.bool_)):
+            raise ValueError(f"wall must be True or False, got {self.wall!r}")
+        object.__setattr__(self, "wall", bool(self.wall))
 
     def for_exponent(self, n: float) -> "ChainModel":
         """This model checked for chains of exponent ``n`` (the law's exponent must be n; a static load

@@ -197,9 +197,9 @@ class StepControl:
 class AdaptiveRK(StepControl, Integrator):
     """Base of the compiled adaptive Runge-Kutta methods (:class:`DP5`, :class:`RKN4`): a method (a scheme of
     the compiled step loop, ``granchain.backends.kernels.schemes``, by the integrator's ``name``) under a
-    step control, whose fields and checks are :class:`StepControl`'s (:attr:`step_control` gives the value).
-    Siblings share the step control, the goal-oriented constructors :meth:`relaxed` and :meth:`windowed`
-    and the records, nothing of each other's method."""
+    step control, whose fields and checks are :class:`StepControl`'s (``step_control`` gives the value).
+    Siblings share the step control, the goal-oriented constructors (:meth:`granchain.DP5.relaxed`,
+    :meth:`granchain.DP5.windowed`) and the records, nothing of each other's method."""
 
     supports_goal_control: ClassVar[bool] = True
     #: The tolerances of :meth:`relaxed` and :meth:`windowed` (each method's own, validated).
@@ -207,7 +207,8 @@ class AdaptiveRK(StepControl, Integrator):
 
     @property
     def step_control(self) -> StepControl:
-        """The integrator's :class:`StepControl` (its step-control fields, as one value)."""
+        """The integrator's :class:`~granchain.solve.integrators.StepControl` (its step-control fields, as one
+        value)."""
         return StepControl(*(getattr(self, f.name) for f in dataclasses.fields(StepControl)))
 
     @property
