@@ -18,7 +18,6 @@ from . import Backend, aligned_outputs, batch_chain, effective_integrator, warm
 from .kernels.batch import integrate_batch, row_records, thread_sums
 from .kernels.dispatch import chain_kernel, integrate_chain, kernel_function
 from .kernels.forces import DAMPING_KUWABARA_KONO, LAW_FORMS, power_code
-from .kernels.schemes import SCHEMES
 from .kernels.records import (
     INFO_SIZE,
     KIND_VERLET,
@@ -33,6 +32,7 @@ from .kernels.records import (
     Sums,
     Tally,
 )
+from .kernels.schemes import SCHEMES
 
 
 def kernel_array(a, dtype=float) -> np.ndarray:

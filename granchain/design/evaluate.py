@@ -43,10 +43,10 @@ class Evaluation:
     failed: np.ndarray
 
 
-def model_of(contact) -> ChainModel | None:
+def model_of(contact) -> ChainModel:
     """The ``model`` of ``Backend.run_batch`` for a design run whose chains have the contact law ``contact``
     (None: the paper's elastic contacts)."""
-    return None if contact is None else ChainModel(contact)
+    return ChainModel(contact)
 
 
 def run_rows(batch, integrator, contacts, backend=None, contact=None) -> dict:
@@ -159,7 +159,7 @@ class BatchEvaluator:
     def __init__(self, space, objective, *, integrator=None, statistic="mean", client=None, workers=None,
                  parts: int | None = None, backend=None, contact=None):
         from ..ensembles import backend as _backend
-        from ..model.contacts import ContactLaw, PowerLaw
+        from ..model.contacts import PowerLaw, checked_law
 
         self.backend = _backend.checked(backend)
         _backend.resolve(self.backend)  # a GPU where none is usable: refused before the first generation
@@ -174,15 +174,10 @@ class BatchEvaluator:
         self.workers = workers
         self.parts = parts
         self.space = space
+        contact = checked_law(contact, space.n, "design space")
+        if isinstance(contact, PowerLaw):
+            contact = None  # the default, recorded as such
         if contact is not None:
-            if not isinstance(contact, ContactLaw):
-                raise ValueError(f"contact must be a contact law (granchain.Viscous, granchain.Viscoelastic, ...) or None, "
-                                 f"got {contact!r}")
-            if contact.n != space.n:
-                raise ValueError(f"the contact law's exponent n = {contact.n:g} differs from the design space's n = "
-                                 f"{space.n:g}: give the same n")
-            if isinstance(contact, PowerLaw):
-                contact = None  # the default, recorded as such
             mats = getattr(space, "materials", None)
             if contact is not None and contact.history and mats and len(set(mats)) > 1:
                 raise ValueError("the elastic-plastic contact takes each contact's yield overlap from its prefactor, which "

@@ -446,7 +446,7 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
             t_max = np.maximum(np.minimum(rows, 2.0 * crossing + 20.0), float(spec.t_grid[-1]))
         _run_batch(
             spec, name, batch, {**{k: a[ci] for k, a in buffers.items()}, "lags": spec.lags},
-            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, model=None if family.elastic else family.model,
+            t_grid=spec.t_grid, t_max=t_max, controls=spec.controls, scale=scale, model=family.model,
             pulse_end=_window.keep_until(spec.pulse_ends[name]) if spec.pulse_ends and name in spec.pulse_ends else None,
         )
     out = {"chunk": j, "realizations": idx.size, **params}

@@ -163,12 +163,12 @@ class RandomDecorated(_Decorated):
         return np.ones(self.n_large)
 
     def describe(self) -> dict:
-        return self._recorded(({"family": self.kind, "n_large": self.n_large,
-                                              "distribution": self.distribution.describe(), "n": self.n,
-                                              "momentum_conserving": self.momentum_conserving}))
+        return self._recorded({"family": self.kind, "n_large": self.n_large,
+                               "distribution": self.distribution.describe(), "n": self.n,
+                               "momentum_conserving": self.momentum_conserving})
 
     def label(self) -> str:
-        return (f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}{self.model.label()}")
+        return f"random decorated, N = {self.n_large}, small radii {self.distribution.label()}{self.model.label()}"
 
     def arrival_ratio(self) -> float:
         return 1.0
@@ -261,9 +261,9 @@ class TaperedDecorated(_Decorated):
         return (1.0 - self.q) ** np.arange(self.n_large, dtype=float)
 
     def describe(self) -> dict:
-        return self._recorded(({"family": self.kind, "n_large": self.n_large, "q": self.q, "large_radii": _TAPER,
-                                              "distribution": self.distribution.describe(), "n": self.n,
-                                              "momentum_conserving": self.momentum_conserving}))
+        return self._recorded({"family": self.kind, "n_large": self.n_large, "q": self.q, "large_radii": _TAPER,
+                               "distribution": self.distribution.describe(), "n": self.n,
+                               "momentum_conserving": self.momentum_conserving})
 
     def label(self) -> str:
         return (f"tapered decorated, N = {self.n_large}, q = {self.q:g}, small/large ratio {self.distribution.label()}"

@@ -91,8 +91,8 @@ class RandomRadii(_RadiiFamily):
         return _stack(params, "radius")
 
     def describe(self) -> dict:
-        return self._recorded(({"family": self.kind, "size": self.size,
-                                              "distribution": self.distribution.describe(), "n": self.n}))
+        return self._recorded({"family": self.kind, "size": self.size,
+                               "distribution": self.distribution.describe(), "n": self.n})
 
     def label(self) -> str:
         return f"random polydisperse, M = {self.size}, radii {self.distribution.label()}{self.model.label()}"
@@ -144,8 +144,8 @@ class BinaryRandom(_RadiiFamily):
         return np.where(species == 1, self.radii[1], self.radii[0]).astype(float)
 
     def describe(self) -> dict:
-        return self._recorded(({"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p,
-                                              "n": self.n}))
+        return self._recorded({"family": self.kind, "size": self.size, "radii": list(self.radii), "p": self.p,
+                               "n": self.n})
 
     def label(self) -> str:
         return (f"binary random, M = {self.size}, radii {self.radii[0]:g}/{self.radii[1]:g}, p = {self.p:g}{self.model.label()}")

@@ -38,7 +38,7 @@ import numpy as np
 from .._validate import count, exponent, finite_scalar, positive_array
 from .chainmodel import ChainModel
 from .contacts import (MIN_DYNAMIC_RATIO, ContactLaw, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker,
-                       Viscoelastic)
+                       Viscoelastic, checked_law)
 
 __all__ = [
     "Chain",
@@ -151,12 +151,7 @@ class Chain:
         striker = bool(self.striker)
         if striker and m.size - wall < 3:
             raise ValueError("a chain with a striker needs the striker and at least 2 granules")
-        contact = PowerLaw(n) if self.contact is None else self.contact
-        if not isinstance(contact, ContactLaw):
-            raise ValueError(f"contact must be a contact law (granchain.PowerLaw, granchain.Viscoelastic, ...: a "
-                             f"granchain.model.contacts.ContactLaw), got {contact!r}")
-        if contact.n != n:
-            raise ValueError(f"the contact law's exponent n = {contact.n:g} differs from the chain's n = {n:g}: give the same n")
+        contact = PowerLaw(n) if self.contact is None else checked_law(self.contact, n)
         load = self.static_force if isinstance(self.static_force, Precompression) else Precompression(self.static_force)
         ratio = load.resolvable(float(m[0]), float(c[0]), n, v0)
         if ratio < MIN_DYNAMIC_RATIO:
@@ -421,7 +416,7 @@ class Chain:
                              "this chain already has its own: build it again without them")
         if self.wall and not model.wall:
             raise ValueError("the chain ends in a wall and the model has none: build the chain without its wall")
-        model = model.for_exponent(self.n)
+        model = model.for_exponent(self.n, "chain")
         chain = model.apply(self)
         return chain.with_wall() if model.wall and not chain.wall else chain
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import finite_scalar
-from .contacts import ContactLaw, PowerLaw, Precompression
+from .contacts import ContactLaw, PowerLaw, Precompression, checked_law, law_from_record
 
 __all__ = ["ChainModel"]
 
@@ -43,10 +43,7 @@ class ChainModel:
     wall: bool = False
 
     def __post_init__(self):
-        law = self.contact
-        if law is not None and not isinstance(law, ContactLaw):
-            raise ValueError(f"contact must be a contact law (granchain.PowerLaw, granchain.Viscoelastic, ...: a "
-                             f"granchain.model.contacts.ContactLaw) or None, got {law!r}")
+        checked_law(self.contact)
         load = self.static_force if isinstance(self.static_force, Precompression) else Precompression(self.static_force)
         object.__setattr__(self, "static_force", load.force)
         if self.striker_mass is not None:
@@ -55,16 +52,13 @@ class ChainModel:
             raise ValueError(f"wall must be True or False, got {self.wall!r}")
         object.__setattr__(self, "wall", bool(self.wall))
 
-    def for_exponent(self, n: float) -> "ChainModel":
+    def for_exponent(self, n: float, owner: str = "family") -> "ChainModel":
         """This model checked for chains of exponent ``n`` (the law's exponent must be n; a static load
-        needs n > 1), with the paper's law given as ``PowerLaw(n)`` recorded as the default (None), so that
-        stores of the paper's chains keep their record."""
-        law = self.contact
-        if law is not None:
-            if law.n != n:
-                raise ValueError(f"the contact law's exponent n = {law.n:g} differs from the family's n = {n:g}: give the same n")
-            if isinstance(law, PowerLaw):
-                law = None
+        needs n > 1; ``owner``: whose n it is, for the message), with the paper's law given as ``PowerLaw(n)``
+        recorded as the default (None), so that stores of the paper's chains keep their record."""
+        law = checked_law(self.contact, n, owner)
+        if isinstance(law, PowerLaw):
+            law = None
         if self.static_force > 0 and n <= 1.0:
             raise ValueError(f"precompression needs an exponent n > 1, got n = {n:g}")
         return ChainModel(law, self.static_force, self.striker_mass, self.wall)
@@ -137,8 +131,6 @@ class ChainModel:
     @classmethod
     def from_record(cls, record: dict) -> "ChainModel":
         """The model a family record (:meth:`record`) holds; the paper's where it holds none of its keys."""
-        from .contacts import law_from_record
-
         law = record.get("contact")
         # (records of the viscoelastic law written before its clamp option hold no "clamp": they were all
         # clamped, its default)

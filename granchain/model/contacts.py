@@ -107,6 +107,20 @@ class ContactLaw:
         raise NotImplementedError
 
 
+def checked_law(law, n: float | None = None, owner: str = "chain"):
+    """``law`` if it is a contact law (None, the paper's default, passes), of exponent ``n`` where given; else a
+    ValueError that says what to give (``owner``: whose exponent n is, for the message). The one check of a
+    law that a chain, a family's model and a design run are given."""
+    if law is None:
+        return None
+    if not isinstance(law, ContactLaw):
+        raise ValueError(f"contact must be a contact law (granchain.PowerLaw, granchain.Viscoelastic, ...: a "
+                         f"granchain.model.contacts.ContactLaw) or None, got {law!r}")
+    if n is not None and law.n != n:
+        raise ValueError(f"the contact law's exponent n = {law.n:g} differs from the {owner}'s n = {n:g}: give the same n")
+    return law
+
+
 def law_from_record(record: dict) -> ContactLaw:
     """The contact law a ``describe()`` record names (as stored in a family's record)."""
     try:
