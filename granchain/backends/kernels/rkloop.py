@@ -2,7 +2,9 @@
 DP5, ``dp5``; RKN4(3), ``rkn4``): PI step control, max-norm error, the active and trailing windows,
 peaks and grid samples from the dense output (``dense``), the stop rule (``stop``). The step control
 (tolerances, the relaxed zone, the trailing window: ``records.Steps``) is the run's, separate from the
-scheme.
+scheme. What an accepted step records is written as blocks of their own, inlined into the loop
+(:func:`yield_turn`, :func:`velocity_peaks`, :func:`force_peaks`, :func:`sample_grid`,
+:func:`trailing_window`; the stop rule is ``stop.end_of_step``).
 
 Step control: the PI controller of Hairer, Norsett & Wanner, *Solving ODEs I*, Sec. II.4 (DOPRI5).
 The error norm is the maximum over components: the pulse is localised, and a root-mean-square norm
@@ -185,6 +187,192 @@ def padded_arrays(model, state):
     return xp, vp, cp, inv_mp, opp, f0pp, Kxp, Kvp, xsp, vsp, Fp, Qp, Qvp, Pdp, ratiop, peak_dp, t_frozenp, histp, dyp
 
 
+# -- The step loop's blocks ---------------------------------------------------------------------------------
+# What an accepted step records, each block a function of its own inlined into the loop at Numba-IR level
+# (``JIT_INLINE``: the same code as written out there, no call and no reference counting). The blocks that
+# call the scheme's functions (``SCHEME.weights``, ``SCHEME.dense_data``) are compiled once per scheme, with
+# ``SCHEME`` bound as in the kernel (:func:`_specialised`); each returns the loop state it moves. A lazy
+# scheme (RKN4) lays its dense output into the stage arrays only when a block needs it (``dense_ready``;
+# laid out every step, it cost RKN4 16 % of an N = 26 decorated chain's time); until then its step's end
+# is in Kv[6] and VS. DP5's dense output is its stages.
+
+def yield_turn(kind, step, VE, hw, fm, Q, QV):
+    """Thornton's contacts: the fraction theta of the step ``step`` (``records.Dense``; VE the velocities at
+    its end) at which the first contact turns from loading to unloading beyond its history (1: none). The
+    stages past such a turn used the loading line, so the step is retaken to end there; the turn is located
+    on this step's dense output, exact up to the turn (the loading line continues smoothly past it)."""
+    X, V, Kx, Kv, h = step
+    OP, H, DY = fm.overlap, fm.history, fm.yield_overlap
+    turn = 1.0
+    for j in range(hw - 1):
+        w0 = Kx[0, j] - Kx[0, j + 1]
+        w1 = VE[j] - VE[j + 1]
+        if falls(w0, w1):
+            theta = first_root(kind, ROOT_APPROACH, j, (w0, w1), step, fm, Q, QV)
+            SCHEME.weights(theta, Q, QV)
+            top = OP[j] + dense_compression(j, X, Kx, h, Q)
+            if top > H[j] + HISTORY_RTOL * DY[j] and theta < turn:
+                turn = theta
+    return turn
+
+
+def velocity_peaks(kind, dense_ready, step, XS, VS, hp, fm, Q, QV, obs, q_lo, q_hi, lo, t, peak_v, peak_t, peak_rtol,
+                   front):
+    """Velocity maxima of the observed granules obs[q_lo..q_hi-1] in the step ``step`` (``records.Dense``,
+    from t; the granules from ``lo`` on), where an acceleration goes from + to -: each root located on the
+    dense output and recorded if it is a new peak (``peaks.is_new_peak``). Returns (front, dense_ready):
+    the most advanced observed granule whose maximum has been located, and whether the dense output is laid
+    out. A vectorised count over every granule of the window (zeros past it) comes first; the loop over the
+    observed granules runs only when it finds one (1.6 % of the steps of an N = 26 decorated chain)."""
+    X, V, Kx, Kv, h = step
+    n_candidates = 0
+    for i in range(hp):
+        n_candidates += falls(Kv[0, i], Kv[6, i])
+    for q in range(q_lo, q_hi if n_candidates > 0 else q_lo):
+        k = obs[q] - lo
+        a0 = Kv[0, k]
+        a1 = Kv[6, k]
+        if falls(a0, a1):
+            if not dense_ready:
+                SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+                dense_ready = True
+            theta = first_root(kind, ROOT_ACCELERATION, k, (a0, a1), step, fm, Q, QV)
+            SCHEME.weights(theta, Q, QV)
+            vpk = dense_value(V[k], Kv, k, h, QV)
+            if is_new_peak(vpk, peak_v[q], peak_rtol):
+                peak_v[q] = vpk
+                peak_t[q] = t + theta * h
+            front = max(front, q)
+    return front, dense_ready
+
+
+def force_peaks(kind, dense_ready, damped, plastic, step, XS, VS, VE, hw, hp, fm, Q, QV, lo, t, peak_f, peak_ft, peak_d,
+                peak_rtol):
+    """Contact-force maxima of the window's contacts in the step ``step`` (``records.Dense``, from t; VE the
+    velocities at its end), recorded into ``peak_f``, ``peak_ft`` (and the compression at each into
+    ``peak_d``) of the chain's contacts from ``lo`` on. Elastic and yielding contacts: where v_j - v_{j+1}
+    goes from + to - (the compression peaks), after the same vectorised count as the velocities' (~80 % of
+    the steps of an N = 26 decorated chain have no candidate; the contacts past the window, resting or
+    padding, are never one, except the padding's with the last granule, which only lets the loop run) and a
+    screen that skips a root the recorded peak beats. ``damped`` (viscoelastic): where the force's rate
+    falls, before the compression peaks. Returns whether the dense output is laid out."""
+    X, V, Kx, Kv, h = step
+    C, _, p, OP, _, H, DY = fm
+    n_candidates = 0
+    if damped:  # a viscoelastic force peaks before its compression does: follow its rate
+        for j in range(hw - 1):
+            r0 = force_rate(OP[j] + (X[j] - X[j + 1]), Kx[0, j] - Kx[0, j + 1], Kv[0, j] - Kv[0, j + 1], C[j], p)
+            r1 = force_rate(OP[j] + (XS[j] - XS[j + 1]), Kx[6, j] - Kx[6, j + 1], Kv[6, j] - Kv[6, j + 1], C[j], p)
+            if falls(r0, r1):
+                theta = first_root(kind, ROOT_FORCE_RATE, j, (r0, r1), step, fm, Q, QV)
+                SCHEME.weights(theta, Q, QV)
+                fp = dense_force(j, step, fm, Q, QV)
+                if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
+                    peak_f[lo + j] = fp
+                    peak_ft[lo + j] = t + theta * h
+    else:
+        # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
+        for j in range(hp):
+            n_candidates += falls(Kx[0, j] - Kx[0, j + 1], VE[j] - VE[j + 1])
+    for j in range(hw - 1 if n_candidates > 0 else 0):
+        w0 = Kx[0, j] - Kx[0, j + 1]
+        w1 = VE[j] - VE[j + 1]
+        if falls(w0, w1):
+            # Screen: the cubic Hermite estimate of the compression maximum from the step ends
+            # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
+            d0 = OP[j] + (X[j] - X[j + 1])
+            d1 = OP[j] + (XS[j] - XS[j + 1])
+            if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
+                continue
+            if not dense_ready:
+                SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+                dense_ready = True
+            theta = first_root(kind, ROOT_APPROACH, j, (w0, w1), step, fm, Q, QV)
+            SCHEME.weights(theta, Q, QV)
+            dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
+            if plastic:  # Thornton's force: the history moved by this step is not yet in H
+                fp = plastic_force(dp, H[j], C[j], DY[j])
+            else:
+                fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
+            if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
+                peak_f[lo + j] = fp
+                peak_ft[lo + j] = t + theta * h
+                peak_d[lo + j] = dp
+    return dense_ready
+
+
+def sample_grid(dense_ready, g, step, XS, VS, hp, fm, Q, QV, lo, hi, M, t, run, out, v, f0):
+    """The grid samples run.t_grid[g..] that fall in the step ``step`` (``records.Dense``, from t; the
+    granules lo..hi-1 integrated, of M): each observed granule's velocity into ``out.grid_v`` (the velocity
+    it left the window with behind it; 0 past its averaged-pulse window, ``run.pulse_end``), the wall's
+    total force into ``out.grid_f`` and each sensed contact's into ``out.grid_c``. Returns the next g."""
+    X, V, Kx, Kv, h = step
+    p = fm.params
+    obs, t_grid, pulse_end, sensed = run.observed, run.t_grid, run.pulse_end, run.contacts
+    n_obs, n_grid, n_sensed = obs.shape[0], t_grid.shape[0], sensed.shape[0]
+    windows = pulse_end.shape[0] > 0
+    hw = hi - lo
+    if not dense_ready:
+        SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
+    while g < n_grid and t_grid[g] <= t + h:
+        theta = (t_grid[g] - t) / h
+        SCHEME.weights(theta, Q, QV)
+        for q in range(n_obs):
+            k = obs[q] - lo
+            if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
+                out.grid_v[g, q] = 0.0
+            elif k < 0:  # behind the window: the velocity it left with
+                out.grid_v[g, q] = v[obs[q]]
+            else:
+                out.grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
+        if p.wall:  # the total force on the wall (the static load included; only that until the pulse is near)
+            out.grid_f[g] = dense_force(M - 2 - lo, step, fm, Q, QV) if M - 2 < hi else f0[M - 2]
+        for s in range(n_sensed):  # granules past the window are at rest: the force is exact there too
+            j = sensed[s] - lo
+            out.grid_c[g, s] = dense_force(j, step, fm, Q, QV) if j >= 0 else math.nan
+        g += 1
+    return g
+
+
+@njit(**JIT_INLINE)
+def trailing_window(target, X, C, p, Kx, Kv, lo, hi, q_lo, q_open, t, run, t_frozen, frozen_potential):
+    """The trailing window's cut: behind observed granule ``target`` (front - window_lag), and not past a
+    granule whose averaged-pulse window is still open (``run.pulse_end``: its grid velocities up to then are
+    recorded exactly), across the last contact behind it that is open now (``window.open_contact_behind``).
+    Granules lo..new_lo-1 leave: they keep their velocities, the potential of the contacts among them (the
+    contact at the new edge is open) and their exit time (``t_frozen``); the stage arrays Kx, Kv shift by the
+    cut over the padded window only (past it they are zeros: the stages write granules
+    0..padded_width(hi - lo) - 1 alone), so that a cut costs O(window), not O(chain) (which made long
+    chains quadratic). Returns (new_lo, q_lo, q_open, frozen_potential); new_lo == lo: no cut."""
+    obs, pulse_end = run.observed, run.pulse_end
+    n_obs = obs.shape[0]
+    if pulse_end.shape[0] > 0:
+        while q_open < n_obs and pulse_end[q_open] < t:
+            q_open += 1
+        target = min(target, q_open)
+    new_lo = open_contact_behind(X, C, p, lo, obs[target])
+    if new_lo > lo:
+        d = new_lo - lo
+        frozen_potential = add_potential(frozen_potential, X, C, p, 0, d - 1)
+        for i in range(d):
+            t_frozen[lo + i] = t
+        wp = padded_width(hi - lo)
+        for s in range(7):
+            for i in range(wp - d):
+                Kx[s, i] = Kx[s, i + d]
+                Kv[s, i] = Kv[s, i + d]
+            for i in range(wp - d, wp):
+                Kx[s, i] = 0.0
+                Kv[s, i] = 0.0
+        while q_lo < n_obs and obs[q_lo] < new_lo:
+            q_lo += 1
+    return new_lo, q_lo, q_open, frozen_potential
+
+
+#: The blocks compiled once per scheme (they call its functions), as globals ``_<block>_<scheme name>``.
+SCHEME_BLOCKS = ("yield_turn", "velocity_peaks", "force_peaks", "sample_grid")
+
+
 def rk_kernel(scheme, general):
     """The compiled single-chain entry point ``kernel(record, model, run, state, out)`` of the
     Runge-Kutta method ``scheme`` (``schemes.Scheme``: ``schemes.DP5``, ``schemes.RKN4``) for the model
@@ -269,14 +457,12 @@ def rk_kernel(scheme, general):
                   run.peak_rtol, borrowed(run.contacts), borrowed(run.pulse_end))
         out = Outputs(borrowed(out.peak_v), borrowed(out.peak_t), borrowed(out.grid_v), borrowed(out.peak_f),
                       borrowed(out.peak_ft), borrowed(out.grid_f), borrowed(out.info), borrowed(out.grid_c))
-        obs, t_grid, pulse_end = run.observed, run.t_grid, run.pulse_end
-        peak_v, peak_t, grid_v, peak_f, peak_ft, grid_f = out.peak_v, out.peak_t, out.grid_v, out.peak_f, out.peak_ft, out.grid_f
+        obs, t_grid = run.observed, run.t_grid
+        peak_v, peak_t, peak_f, peak_ft = out.peak_v, out.peak_t, out.peak_f, out.peak_ft
         peak_rtol = run.peak_rtol
         h_fixed, relax_lag, window_lag = steps.fixed_step, steps.relaxed_lag, steps.window_lag
         n_obs = obs.shape[0]
         n_grid = t_grid.shape[0]
-        sensed = run.contacts
-        n_sensed = sensed.shape[0]
 
         # The window: granules lo..hi-1 are integrated (lo = 0 until a trailing-window cut). Kx, Kv are
         # window-local (shifted to start at lo at each cut); the other arrays are read through views from
@@ -306,13 +492,12 @@ def rk_kernel(scheme, general):
         # Observed granules whose averaged-pulse window has closed: obs[0..q_open-1] (run.pulse_end; only
         # moves forward). The trailing window never cuts ahead of obs[q_open].
         q_open = 0
-        windows = pulse_end.shape[0] > 0
         relaxed = 0  # granules lo..lo+relaxed-1 are in the relaxed zone
         frozen_potential = 0.0
         dissipated = 0.0
 
         t = 0.0
-        g = initial_records(obs, v, t_grid, peak_v, peak_t, grid_v)
+        g = initial_records(obs, v, t_grid, peak_v, peak_t, out.grid_v)
         t_needed = t_grid[n_grid - 1] if n_grid > 0 else 0.0
         initial_force_records(x[:M], v[:M], model, g, out, run.contacts)
 
@@ -376,116 +561,20 @@ def rk_kernel(scheme, general):
                     if h < 1e-14 * max(1.0, t):
                         status = STEP_UNDERFLOW
                     continue
-                if plastic:
-                    # A contact that turns from loading to unloading inside the step: its stages past the turn
-                    # used the loading line. The step is retaken to end at the first such turn (located on this
-                    # step's dense output, exact up to the turn: the loading line continues smoothly past it).
-                    turn = 1.0
-                    for j in range(hw - 1):
-                        w0 = Kx[0, j] - Kx[0, j + 1]
-                        w1 = VE[j] - VE[j + 1]
-                        if falls(w0, w1):
-                            theta = first_root(kind, ROOT_APPROACH, j, (w0, w1), Dense(X, V, Kx, Kv, h), FM, Q, QV)
-                            SCHEME.weights(theta, Q, QV)
-                            top = OP[j] + dense_compression(j, X, Kx, h, Q)
-                            if top > H[j] + HISTORY_RTOL * DY[j] and theta < turn:
-                                turn = theta
+                step = Dense(X, V, Kx, Kv, h)
+                if plastic:  # retaken to end where a contact turns from loading to unloading
+                    turn = yield_turn(kind, step, VE, hw, FM, Q, QV)
                     if turn < 1.0 - TURN_SLACK:
                         n_rej += 1
                         h *= turn
                         continue
-
-                # Accepted: peaks and grid samples from the dense output over [t, t + h]. A lazy scheme (RKN4)
-                # lays its dense output into the stage arrays only when a step needs it (a root or a grid
-                # sample; laid out every step, it cost RKN4 16 % of an N = 26 decorated chain's time); until
-                # then its step's end is in Kv[6] and VS. DP5's dense output is its stages.
-                dense_ready = not lazy_dense
-                step = Dense(X, V, Kx, Kv, h)
-                # Velocity maxima where an acceleration goes from + to -: a vectorised count over every
-                # granule of the window (zeros past it) first; the loop over the observed granules runs
-                # only when it finds one (1.6 % of the steps of an N = 26 decorated chain have one there).
-                n_candidates = 0
-                for i in range(hp):
-                    n_candidates += falls(Kv[0, i], Kv[6, i])
-                for q in range(q_lo, q_hi if n_candidates > 0 else q_lo):
-                    k = obs[q] - lo
-                    a0 = Kv[0, k]
-                    a1 = Kv[6, k]
-                    if falls(a0, a1):
-                        if not dense_ready:
-                            SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
-                            dense_ready = True
-                        theta = first_root(kind, ROOT_ACCELERATION, k, (a0, a1), step, FM, Q, QV)
-                        SCHEME.weights(theta, Q, QV)
-                        vpk = dense_value(V[k], Kv, k, h, QV)
-                        if is_new_peak(vpk, peak_v[q], peak_rtol):
-                            peak_v[q] = vpk
-                            peak_t[q] = t + theta * h
-                        front = max(front, q)
-                # Contact forces: compression maxima where v_j - v_{j+1} goes from + to -. The same
-                # vectorised count first (~80 % of the steps of an N = 26 decorated chain have no
-                # candidate; the contacts past the window, resting or padding, are never one, except the
-                # padding's with the last granule, which only lets the loop run).
-                # (One rarely taken branch per contact: a test of w0 > 0 alone would be a coin flip.)
-                n_candidates = 0
-                if damped:  # a viscoelastic force peaks before its compression does: follow its rate
-                    for j in range(hw - 1):
-                        r0 = force_rate(OP[j] + (X[j] - X[j + 1]), Kx[0, j] - Kx[0, j + 1], Kv[0, j] - Kv[0, j + 1], C[j], p)
-                        r1 = force_rate(OP[j] + (XS[j] - XS[j + 1]), Kx[6, j] - Kx[6, j + 1], Kv[6, j] - Kv[6, j + 1], C[j], p)
-                        if falls(r0, r1):
-                            theta = first_root(kind, ROOT_FORCE_RATE, j, (r0, r1), step, FM, Q, QV)
-                            SCHEME.weights(theta, Q, QV)
-                            fp = dense_force(j, step, FM, Q, QV)
-                            if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
-                                peak_f[lo + j] = fp
-                                peak_ft[lo + j] = t + theta * h
-                else:
-                    for j in range(hp):
-                        n_candidates += falls(Kx[0, j] - Kx[0, j + 1], VE[j] - VE[j + 1])
-                for j in range(hw - 1 if n_candidates > 0 else 0):
-                    w0 = Kx[0, j] - Kx[0, j + 1]
-                    w1 = VE[j] - VE[j + 1]
-                    if falls(w0, w1):
-                        # Screen: the cubic Hermite estimate of the compression maximum from the step ends
-                        # (error O(h^4), far below the margin) cannot beat the recorded peak: skip the root.
-                        d0 = OP[j] + (X[j] - X[j + 1])
-                        d1 = OP[j] + (XS[j] - XS[j + 1])
-                        if hermite_max_estimate(d0, w0, d1, w1, h) < SCREEN * peak_d[lo + j]:
-                            continue
-                        if not dense_ready:
-                            SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
-                            dense_ready = True
-                        theta = first_root(kind, ROOT_APPROACH, j, (w0, w1), step, FM, Q, QV)
-                        SCHEME.weights(theta, Q, QV)
-                        dp = OP[j] + dense_compression(j, X, Kx, h, Q)  # the static overlap included
-                        if plastic:  # Thornton's force: the history moved by this step is not yet in H
-                            fp = plastic_force(dp, H[j], C[j], DY[j])
-                        else:
-                            fp = contact_force(dp, C[j], p)  # Eq. (motion_rescaled): c_j delta^(n-1)
-                        if fp > 0.0 and is_new_peak(fp, peak_f[lo + j], peak_rtol):
-                            peak_f[lo + j] = fp
-                            peak_ft[lo + j] = t + theta * h
-                            peak_d[lo + j] = dp
-                if not dense_ready and g < n_grid and t_grid[g] <= t + h:
-                    SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
-                while g < n_grid and t_grid[g] <= t + h:
-                    theta = (t_grid[g] - t) / h
-                    SCHEME.weights(theta, Q, QV)
-                    for q in range(n_obs):
-                        k = obs[q] - lo
-                        if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
-                            grid_v[g, q] = 0.0
-                        elif k < 0:  # behind the window: the velocity it left with
-                            grid_v[g, q] = v[obs[q]]
-                        else:
-                            grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
-                    if p.wall:  # the total force on the wall (the static load included; only that until the pulse is near)
-                        grid_f[g] = dense_force(M - 2 - lo, step, FM, Q, QV) if M - 2 < hi else f0p[M - 2]
-                    for s in range(n_sensed):  # granules past the window are at rest: the force is exact there too
-                        j = sensed[s] - lo
-                        out.grid_c[g, s] = dense_force(j, step, FM, Q, QV) if j >= 0 else math.nan
-                    g += 1
-
+                # Accepted: peaks and grid samples from the dense output over [t, t + h].
+                front, dense_ready = velocity_peaks(kind, not lazy_dense, step, XS, VS, hp, FM, Q, QV, obs, q_lo, q_hi, lo,
+                                                    t, peak_v, peak_t, peak_rtol, front)
+                dense_ready = force_peaks(kind, dense_ready, damped, plastic, step, XS, VS, VE, hw, hp, FM, Q, QV, lo, t,
+                                          peak_f, peak_ft, peak_d, peak_rtol)
+                if g < n_grid and t_grid[g] <= t + h:
+                    g = sample_grid(dense_ready, g, step, XS, VS, hp, FM, Q, QV, lo, hi, M, t, run, out, v, f0p)
                 for i in range(hp):
                     X[i] = XS[i]
                     V[i] = VS[i]
@@ -516,35 +605,10 @@ def rk_kernel(scheme, general):
                 cut = False
                 if goal and front >= 0:
                     if window_lag > 0 and front >= window_lag:
-                        # Behind the front's lag, and not past a granule whose averaged-pulse window is
-                        # still open (its grid velocities up to run.pulse_end are recorded exactly).
-                        target = front - window_lag
-                        if windows:
-                            while q_open < n_obs and pulse_end[q_open] < t:
-                                q_open += 1
-                            target = min(target, q_open)
-                        new_lo = open_contact_behind(X, C, p, lo, obs[target])
+                        new_lo, q_lo, q_open, frozen_potential = trailing_window(front - window_lag, X, C, p, Kx, Kv, lo, hi,
+                                                                                 q_lo, q_open, t, run, t_frozen, frozen_potential)
                         if new_lo > lo:
-                            # Granules lo..new_lo-1 leave: keep their velocities, the potential of the
-                            # contacts among them (the contact at the new edge is open), their exit time.
-                            d = new_lo - lo
-                            frozen_potential = add_potential(frozen_potential, X, C, p, 0, d - 1)
-                            for i in range(d):
-                                t_frozen[lo + i] = t
-                            # Shift the stage arrays by d over the padded window only: past it they are
-                            # zeros (the stages write granules 0..padded_width(hi - lo) - 1 alone), so the
-                            # cut costs O(window), not O(chain) (which made long chains quadratic).
-                            wp = padded_width(hi - lo)
-                            for s in range(7):
-                                for i in range(wp - d):
-                                    Kx[s, i] = Kx[s, i + d]
-                                    Kv[s, i] = Kv[s, i + d]
-                                for i in range(wp - d, wp):
-                                    Kx[s, i] = 0.0
-                                    Kv[s, i] = 0.0
                             lo = new_lo
-                            while q_lo < n_obs and obs[q_lo] < lo:
-                                q_lo += 1
                             cut = True
                             if damped:  # the power of the contacts still integrated (the next step's first stage)
                                 Pd[0] = accelerations_once(x[lo:], v[lo:], Forces(c[lo:], inv_m[lo:], p, op[lo:], f0p[lo:],
@@ -598,14 +662,21 @@ def rk_kernel(scheme, general):
     return njit(**JIT)(named(f"{scheme.name}_{'general' if general else 'paper'}")(_specialised(kernel, scheme)))
 
 
-def _specialised(kernel, scheme):
-    """``kernel`` with its global name ``SCHEME`` bound to ``scheme.module``: a copy of the function whose
-    code reads that name as ``_scheme_<name>``, a global of this module set here (the function keeps this
-    module's globals, so what tests patch here it sees)."""
-    alias = f"_scheme_{scheme.name}"
-    globals()[alias] = scheme.module
-    code = kernel.__code__
-    code = code.replace(co_names=tuple(alias if name == "SCHEME" else name for name in code.co_names))
-    bound = types.FunctionType(code, kernel.__globals__, kernel.__name__, kernel.__defaults__, kernel.__closure__)
-    bound.__qualname__, bound.__doc__, bound.__module__ = kernel.__qualname__, kernel.__doc__, kernel.__module__
+def _specialised(func, scheme):
+    """``func`` with its global names bound for ``scheme``: a copy of the function whose code reads ``SCHEME``
+    as ``_scheme_<name>``, a global of this module set here to ``scheme.module``, and each block of
+    :data:`SCHEME_BLOCKS` as ``_<block>_<name>``, that block compiled (inlined) for the scheme. The copy
+    keeps this module's globals, so what tests patch here it sees."""
+    tag = scheme.name
+    names = {"SCHEME": f"_scheme_{tag}"}
+    globals()[names["SCHEME"]] = scheme.module
+    for block in SCHEME_BLOCKS:
+        if block in func.__code__.co_names:
+            names[block] = f"_{block}_{tag}"
+            if names[block] not in globals():
+                globals()[names[block]] = njit(**JIT_INLINE)(_specialised(globals()[block], scheme))
+    code = func.__code__
+    code = code.replace(co_names=tuple(names.get(name, name) for name in code.co_names))
+    bound = types.FunctionType(code, func.__globals__, func.__name__, func.__defaults__, func.__closure__)
+    bound.__qualname__, bound.__doc__, bound.__module__ = func.__qualname__, func.__doc__, func.__module__
     return bound
