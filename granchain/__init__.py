@@ -38,6 +38,7 @@ from .ensembles.run import (
     EnsembleSpec,
     default_time_grid,
     ensemble_integrator,
+    family_integrator,
     run_ensemble,
 )
 from .ensembles.read import open_store
@@ -95,6 +96,7 @@ __all__ = [
     "effective_parameters",
     "ensemble_integrator",
     "family_from_dataset",
+    "family_integrator",
     "family_from_record",
     "from_radii",
     "get_integrator",

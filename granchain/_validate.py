@@ -23,6 +23,17 @@ class EffectiveValidityWarning(UserWarning):
     """The effective (undecorated) description is used outside its validity."""
 
 
+def real_number(value, what: str) -> float:
+    """``value`` as a float, or a ValueError naming ``what`` (not a bool or a string: a flag or text
+    where a number belongs is a mistake)."""
+    if isinstance(value, (bool, str, bytes)):
+        raise ValueError(f"{what} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be a number, got {value!r}") from None
+
+
 def finite_scalar(name: str, value, *, positive: bool = False) -> float:
     """Return ``value`` as a float, refusing NaN/inf (and <= 0 if ``positive``)."""
     try:

@@ -81,6 +81,24 @@ def test_any_model_round_trips(law, load, striker, wall):
     assert (label == "") == (model.elastic and not wall) == (fam.describe() == gc.RandomDecorated(4).describe())
 
 
+@settings(max_examples=24, deadline=None)
+@given(load=hs.sampled_from([0.0, 1e-3, 0.05]), striker=hs.sampled_from([None, 2.0]), wall=hs.booleans(),
+       seed=hs.integers(0, 50))
+def test_the_models_far_end_and_exit_rule_are_its_chains(load, striker, wall, seed):
+    """The family's model says which far end its chains have and whether their runs can end at the
+    pulse's exit, as each chain built from it does (one rule for both: ``conditions.far_end``): a wall;
+    else a loaded end under a static load, else a free one; no exit under a static load, wall or not."""
+    model = gc.ChainModel(None, load, striker, wall)
+    for fam in _families(model=model).values():
+        chain = fam.chain(seed, 0, fam.chains[0])
+        assert type(chain.boundary) is model.boundary
+        assert chain.ends_at_exit == model.ends_at_exit == (load == 0.0)
+        assert chain.precompression.applied == model.precompression.applied == (load > 0.0)
+    expected = gc.model.FixedWall if wall else (gc.model.LoadedEnd if load > 0 else gc.model.FreeEnd)
+    assert model.boundary is expected
+    assert model.boundary.licenses_goal_control == (not wall and load == 0.0)
+
+
 def test_a_keyword_that_contradicts_the_model_is_refused():
     model = gc.ChainModel(gc.Viscous(0.1), static_force=0.01)
     with pytest.raises(ValueError, match="contact both in model= and as keywords"):

@@ -357,6 +357,64 @@ def test_custom_family_refuses_realisations_of_another_size():
         gc.run_ensemble(family, realizations=2, progress=False)
 
 
+
+# -- the family names its chains' default integrator --------------------------------------------
+@pytest.mark.parametrize("key", FAMILIES)
+def test_each_family_names_a_known_character_for_each_of_its_chains(key):
+    from granchain.solve.defaults import CHARACTERS
+
+    family = FAMILIES[key]()
+    for chain in family.chains:
+        assert family.character(chain) in CHARACTERS
+    with pytest.raises(ValueError, match="builds the chains"):
+        family.character("no such chain")
+
+
+@pytest.mark.parametrize("windowed", [True, False])
+def test_the_shipped_families_defaults_are_the_validated_ones(windowed):
+    """Decorated chains RKN4 at the ensembles' tolerances (DP5 with velocity-dependent contacts), effective
+    chains DP5 at the smooth ones, polydisperse and binary chains DP5 without the relaxed zone."""
+    rkn4 = gc.RKN4.windowed if windowed else gc.RKN4.relaxed
+    dp5 = gc.DP5.windowed if windowed else gc.DP5.relaxed
+    expected = {
+        (gc.RandomDecorated(6), "decorated"): rkn4(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL),
+        (gc.RandomDecorated(6), "effective"): dp5(gc.SMOOTH_RTOL, gc.SMOOTH_ATOL),
+        (gc.RandomDecorated(6, contact=gc.Viscoelastic(0.1)), "decorated"): gc.DP5.relaxed(gc.DAMPED_RTOL, gc.DAMPED_ATOL),
+        (gc.TaperedDecorated(6, q=0.1), "decorated"): rkn4(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL),
+        (gc.RandomRadii(8, gc.Uniform(0.5, 1.0)), "polydisperse"): gc.DP5(gc.RANDOM_RTOL, gc.RANDOM_ATOL),
+        (gc.BinaryRandom(8, (1.0, 0.6), 0.4), "binary"): gc.DP5(gc.RANDOM_RTOL, gc.RANDOM_ATOL),
+    }
+    for (family, chain), integrator in expected.items():
+        assert ens.family_integrator(family, chain, windowed=windowed) == integrator, (family, chain)
+        assert ens.ensemble_integrator(chain, conservative=family.model.conservative, windowed=windowed) == integrator
+
+
+class _LikeDecorated(gc.CustomFamily):
+    """A user's family of decorated chains that says so."""
+
+    def character(self, chain):
+        super().character(chain)
+        return "light granules"
+
+
+def test_a_chains_name_does_not_pick_its_integrator_its_family_does():
+    def beads(rng):  # large granules with a light one in each gap, as a decorated chain
+        return np.where(np.arange(7) % 2 == 0, 1.0, rng.uniform(0.1, 0.3))
+
+    named = gc.CustomFamily(beads, name="decorated")  # a name, not a claim about the chains
+    assert ens.family_integrator(named, "decorated") == gc.DP5(gc.RANDOM_RTOL, gc.RANDOM_ATOL)
+    said = _LikeDecorated(beads, name="beads")  # the family says what its chains are like
+    assert ens.family_integrator(said, "beads") == gc.RKN4.windowed(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL)
+    assert gc.run_ensemble(said, realizations=2, seed=1, progress=False).attrs["integrator"] == "rkn4"
+    assert gc.run_ensemble(named, realizations=2, seed=1, progress=False).attrs["integrator"] == "dp5"
+
+
+def test_an_unknown_character_is_refused():
+    from granchain.solve.defaults import default_integrator
+
+    with pytest.raises(ValueError, match="light granules"):
+        default_integrator("granular")
+
 @pytest.mark.parametrize(
     "make, words",
     [

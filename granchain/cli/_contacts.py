@@ -3,8 +3,9 @@ contacts (Thornton's elastic-plastic law), a striker and the wall's material.
 
 ``granchain pulse`` and ``granchain ensemble`` take them (:func:`add_contact_arguments`), ``granchain
 design`` the dissipative laws (:func:`add_damping_arguments`);
-:func:`contacts_from_args` reads them back as the keywords of a chain family (``contact``,
-``static_force``, ``striker_mass``) in the paper's rescaled units. A bare number is rescaled; a
+:func:`model_from_args` reads them back as one :class:`granchain.ChainModel` (the contact law, the static
+load, the striker, the wall), which a chain family takes whole and :func:`apply_to_chain` puts on one chain,
+in the paper's rescaled units. A bare number is rescaled; a
 quantity with a unit (``2N``, ``5g``, ``3mm``, ``1m/s``, ``2us``) is physical and needs the
 physical-unit options (``--material``, ``--radius``, ``--impact-speed``: ``granchain.units``),
 which fix the force, mass, length, velocity and time units.
@@ -12,7 +13,7 @@ which fix the force, mass, length, velocity and time units.
 
 from __future__ import annotations
 
-__all__ = ["add_contact_arguments", "add_damping_arguments", "contacts_from_args", "apply_to_chain"]
+__all__ = ["add_contact_arguments", "add_damping_arguments", "model_from_args", "apply_to_chain"]
 
 
 def add_contact_arguments(parser, *, sensor: bool = False) -> None:
@@ -132,10 +133,12 @@ def _checked(option: str, text: str, make):
         raise ValueError(f"{option} {text!r}: {exc}") from None
 
 
-def contacts_from_args(args, units, n: float) -> dict:
-    """The real contacts the options ask for: {"contact": law or None, "static_force": F0,
-    "striker_mass": M or None, "wall_material": name or None} in rescaled units (errors say what to
-    change, quoting what was typed)."""
+def model_from_args(args, units, n: float):
+    """The chains' physics the options ask for, as one :class:`granchain.ChainModel` (law, static load,
+    striker mass, ``--wall``) in rescaled units, checked for chains of exponent ``n`` (errors say what to
+    change, quoting what was typed). The wall's material is a property of one chain's wall, not of the
+    model: :func:`wall_material_from_args`."""
+    from ..model.chainmodel import ChainModel
     from ..model.contacts import ElasticPlastic, Precompression, Viscoelastic, Viscous
 
     text = getattr(args, "precompression", None)
@@ -144,7 +147,7 @@ def contacts_from_args(args, units, n: float) -> dict:
     if force is not None and force < 0:
         raise ValueError(f"--precompression must be finite and >= 0 (a compressive force; 0: none), got {text!r}")
     load = Precompression(0.0) if force is None else _checked("--precompression", text, lambda: Precompression(force))
-    if load.force > 0 and n <= 1.0:
+    if load.applied and n <= 1.0:
         raise ValueError(f"--precompression needs an exponent n > 1 (--n), got {n:g}")
     law = None
     text = getattr(args, "dissipation", None)
@@ -192,22 +195,29 @@ def contacts_from_args(args, units, n: float) -> dict:
 
         _checked("--striker-radius", rtext, lambda: _check_radii(__import__("numpy").array([radius]), "striker radius"))
         mass = radius**3  # a sphere of the chain's material (rescaled mass R^3)
+    wall_material_from_args(args)
+    return ChainModel(law, load, mass, bool(getattr(args, "wall", False))).for_exponent(n, "command line")
+
+
+def wall_material_from_args(args):
+    """The wall's material ``--wall-material`` names (None: the granules' own), which needs ``--wall``."""
     wall_material = getattr(args, "wall_material", None)
     if wall_material is not None and not getattr(args, "wall", False):
         raise ValueError("--wall-material needs --wall")
-    return {"contact": law, "static_force": load.force, "striker_mass": mass, "wall_material": wall_material}
+    return wall_material
 
 
-def apply_to_chain(chain, contacts: dict, args=None):
-    """``chain`` with the real contacts of :func:`contacts_from_args` (striker, law, static load); a
-    refusal quotes the option's text in ``args`` (what the user typed), not its rescaled value."""
+def apply_to_chain(chain, model, args=None):
+    """``chain`` with the striker, law and static load of ``model`` (:func:`model_from_args`; its wall is
+    the caller's, which builds it with its material); a refusal quotes the option's text in ``args``
+    (what the user typed), not its rescaled value."""
     said = {k: getattr(args, k, None) for k in ("precompression", "striker_mass", "striker_radius")}
-    if contacts["striker_mass"] is not None:
+    if model.striker_mass is not None:
         option = "--striker-radius" if said.get("striker_radius") is not None else "--striker-mass"
         chain = _checked(option, said.get(option[2:].replace("-", "_")),
-                         lambda: chain.with_striker(mass=contacts["striker_mass"]))
-    if contacts["contact"] is not None or contacts["static_force"] > 0:
-        change = dict(contact=contacts["contact"] or chain.contact, static_force=contacts["static_force"])
+                         lambda: chain.with_striker(mass=model.striker_mass))
+    if model.contact is not None or model.precompression.applied:
+        change = dict(contact=model.law(chain.n), static_force=model.static_force)
         chain = (_checked("--precompression", said["precompression"], lambda: chain.replace(**change))
                  if said.get("precompression") is not None else chain.replace(**change))
     return chain

@@ -137,9 +137,9 @@ def run(args) -> int:
     check_usable(args)
     out = output_directory(args.out, "--out")  # checked before any work: a run's result must have somewhere to go
     units = scale_from_args(args, n=2.5)  # checked before any integration
-    from ._contacts import contacts_from_args
+    from ._contacts import model_from_args
 
-    contact = contacts_from_args(args, units, 2.5)["contact"]
+    contact = model_from_args(args, units, 2.5).contact
     space = build_space(args)
     local = None if args.local == "none" else args.local
     budget = args.budget if args.budget is not None else max(DEFAULT_BUDGET, minimum_budget(space, args.popsize, local))

@@ -150,34 +150,34 @@ def build_family(args, units=None):
     given with units)."""
     from ..families import BinaryRandom, RandomDecorated, RandomRadii, TaperedDecorated
     from ..model.distributions import Uniform
-    from ._contacts import contacts_from_args
+    from ._contacts import model_from_args, wall_material_from_args
 
-    contacts = contacts_from_args(args, units, args.n)
-    if contacts.pop("wall_material") is not None:
+    model = model_from_args(args, units, args.n)  # the chains' physics, --wall included
+    if wall_material_from_args(args) is not None:
         raise ValueError("--wall-material applies to granchain pulse; an ensemble's wall is of the granules' own material")
     lo, hi = DEFAULT_INTERVAL.get(args.family, (None, None))
     if args.family == "binary":
         if args.alpha is not None or args.beta is not None:
             raise ValueError("--alpha/--beta do not apply to --family binary (it takes --radii RA,RB and --p)")
-        return BinaryRandom(args.size, _pair(args.radii), args.p, n=args.n, wall=args.wall, **contacts)
+        return BinaryRandom(args.size, _pair(args.radii), args.p, n=args.n, model=model)
     dist = Uniform(lo if args.alpha is None else args.alpha, hi if args.beta is None else args.beta)
     if args.family == "polydisperse":
-        return RandomRadii(args.size, dist, n=args.n, wall=args.wall, **contacts)
+        return RandomRadii(args.size, dist, n=args.n, model=model)
     if args.family == "tapered-decorated":
         return TaperedDecorated(args.large, q=args.q, distribution=dist, n=args.n, momentum_conserving=args.momentum_conserving,
-                                wall=args.wall, **contacts)
-    return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving, wall=args.wall, **contacts)
+                                model=model)
+    return RandomDecorated(args.large, dist, n=args.n, momentum_conserving=args.momentum_conserving, model=model)
 
 
-def build_integrator(args, chains, conservative: bool = True):
+def build_integrator(args, family, chains):
     """The integrator the arguments name, with its settings. Without --integrator (or with dp5 or rkn4)
-    and without --rtol/--atol: a {chain kind: integrator} dict of each kind's ensemble default
-    (``ensemble_integrator``: rkn4 for decorated chains, dp5 for the others), or of the named
-    method at that kind's tolerances, with the --error-control settings. --rtol/--atol without
-    --integrator set DP5's (as ``run_ensemble(rtol=...)``)."""
+    and without --rtol/--atol: a {chain kind: integrator} dict of each kind's default, which the
+    family names by the chain's character (``granchain.ensembles.run.family_integrator``: rkn4 for
+    decorated chains, dp5 for the others), or of the named method at that kind's settings, with the
+    --error-control settings. --rtol/--atol without --integrator set DP5's (as ``run_ensemble(rtol=...)``)."""
     import dataclasses
 
-    from ..ensembles.run import RANDOM_ATOL, RANDOM_RTOL, SMOOTH_ATOL, SMOOTH_RTOL, ensemble_integrator
+    from ..ensembles.run import family_integrator
     from ..solve.integrators import DP5, INTEGRATORS, RELAXED_LAG, WINDOW_LAG
 
     cls = None if args.integrator is None else INTEGRATORS[args.integrator]
@@ -192,27 +192,21 @@ def build_integrator(args, chains, conservative: bool = True):
         raise ValueError(f"{', '.join(wrong)} does not apply to --integrator {named}")
     if not adaptive:
         return cls(**{k: v for k, v in given.items() if v is not None})
-    # The zones asked for (relaxed zone and trailing window); without --error-control each kind's default:
-    # windowed for decorated and effective chains, exact for the others, which keep it with "relaxed" too
-    # (their granules can peak after the pulse has passed).
-    paper_kinds = ("decorated", "effective")
     windowed = args.pulse_window != "full"  # the defaults' trailing window, unless the whole grid is asked
+    # The zones asked for (relaxed zone and trailing window); without --error-control each kind's default.
     zones = {None: None, "relaxed": {"relaxed_lag": RELAXED_LAG, "window_lag": None},
              "windowed": {"relaxed_lag": RELAXED_LAG, "window_lag": WINDOW_LAG},
              "exact": {"relaxed_lag": None, "window_lag": None}}[args.error_control]
 
+    def default(kind):  # the kind's default, or the named method at that kind's settings
+        return family_integrator(family, kind, windowed=windowed, method=cls)
+
     def goal(kind):
-        if zones is None or (args.error_control == "relaxed" and kind not in paper_kinds):
+        # A kind whose default has no relaxed zone (reflecting chains: their granules can peak after the
+        # pulse has passed) keeps it without with "relaxed" too.
+        if zones is None or (args.error_control == "relaxed" and not default(kind).relaxed_lag):
             return {}
         return zones
-
-    def default(kind):  # the kind's ensemble default, or the named method at that kind's tolerances
-        if cls is None:
-            return ensemble_integrator(kind, conservative=conservative, windowed=windowed)
-        zone = cls.windowed if windowed else cls.relaxed
-        if kind == "decorated":
-            return zone()
-        return zone(SMOOTH_RTOL, SMOOTH_ATOL) if kind == "effective" else cls(RANDOM_RTOL, RANDOM_ATOL)
 
     if args.rtol is None and args.atol is None:  # each chain kind's default tolerances
         return {c: dataclasses.replace(default(c), **goal(c)) for c in chains}
@@ -274,7 +268,7 @@ def run(args) -> int:
 
         integrator = stored_integrators(args.out)  # a store is continued with the integrators it was started with
     if integrator is None:
-        integrator = build_integrator(args, family.chains if chains == "both" else chains, family.model.conservative)
+        integrator = build_integrator(args, family, family.chains if chains == "both" else chains)
     client = connect(args.scheduler)
     try:
         ds = run_ensemble(

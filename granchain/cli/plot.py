@@ -134,6 +134,16 @@ class PulsePlot:
     sensors: list | None
 
 
+def passage_time(chain) -> float:
+    """The end of a time grid over the pulse's passage through ``chain``: 2.5 time units per granule
+    plus 20 (the decorated chains' slope is ~2.4 per large granule), or for a chain without an exit to end
+    at (precompressed: the pulse comes back from its loaded end) the time it runs to
+    (``granchain.solve.simulation.default_t_max``)."""
+    from ..solve.simulation import default_t_max
+
+    return 2.5 * chain.size + 20.0 if chain.ends_at_exit else default_t_max(chain)
+
+
 def pulse_plot_request(args, chain, grid, sensors):
     """None without ``--plot``; else the checked request, with the time grid (``grid`` if one is already
     asked for, else one over the pulse's passage) and the sensors (``sensors`` if given, else every observed
@@ -144,13 +154,12 @@ def pulse_plot_request(args, chain, grid, sensors):
                 raise ValueError(f"--{flag.replace('_', '-')} applies to a figure: add --plot FILE.png")
         return None
     from ..solve.plot import _pick, check_figure_path, force_sensors, granule_labels
-    from ..solve.simulation import default_t_max
 
     path = check_figure_path(args.plot, "--plot")
     kind, quantity = args.plot_kind or "spacetime", args.plot_quantity or "velocity"
     granules = parse_granules(args.plot_granules, "--plot-granules")
     if grid is None:  # the pulse's passage (as for sensors), sampled finely enough for its shape
-        t_end = default_t_max(chain) if chain.static_force > 0 else 2.5 * chain.size + 20.0
+        t_end = passage_time(chain)
         grid = np.linspace(0.0, t_end, int(min(PLOT_SAMPLES, np.ceil(t_end / PLOT_STEP))) + 1)
     if quantity == "force" and sensors is None:
         sensors = force_sensors(chain)

@@ -9,9 +9,9 @@ import numpy as np
 
 from ..solve.integrators import INTEGRATORS
 from ._backend import add_backend_arguments, backend_of, check_usable
-from ._contacts import add_contact_arguments, apply_to_chain, contacts_from_args
+from ._contacts import add_contact_arguments, apply_to_chain, model_from_args, wall_material_from_args
 from ._units import add_unit_arguments, scale_from_args
-from .plot import add_pulse_plot_arguments, pulse_plot_request, write_pulse_plot
+from .plot import add_pulse_plot_arguments, passage_time, pulse_plot_request, write_pulse_plot
 
 
 def _floats(text: str, flag: str = "--radii") -> list[float]:
@@ -139,7 +139,7 @@ def _sensor_summary(result, scale=None) -> str:
     lines = []
     for k, f, t in zip(result.sensor_granule, peak, when):
         text = f"# sensor granule {k}: peak force {f:.9g} at t = {t:.6f}"
-        if result.static_force > 0:
+        if result.chain.precompression.applied:
             text += f" (dynamic {f - result.static_force:.9g})"
         if scale is not None:
             text += f"; {f * scale.force:.6g} N at {t * scale.time:.6e} s"
@@ -154,7 +154,7 @@ def run(args) -> int:
         raise ValueError("--momentum-conserving applies only to the effective chain: add --effective (with --small-radii)")
     check_usable(args)  # a GPU asked where none can run: its one-line reason, before any work
     units = scale_from_args(args)  # None without unit options; checked before integrating
-    contacts = contacts_from_args(args, units, args.n)
+    model = model_from_args(args, units, args.n)
     if args.small_radii is not None:
         chain = gc.decorated(_floats(args.small_radii, "--small-radii"), n=args.n)
         if args.effective:
@@ -164,17 +164,17 @@ def run(args) -> int:
             raise ValueError("--effective needs --small-radii (a decorated chain)")
         chain = gc.from_radii(_floats(args.radii, "--radii"), n=args.n)
     if args.wall:
-        material = contacts["wall_material"]
+        material = wall_material_from_args(args)
         if material is not None and units is None:
             raise ValueError("--wall-material is stiff relative to the beads' material: give the physical-unit options "
                              "too (--material or --E/--nu/--rho, --radius, --impact-speed)")
         chain = (chain.with_wall(material=material, granules=units.material) if material is not None
                  else chain.with_wall())
-    chain = apply_to_chain(chain, contacts, args)
+    chain = apply_to_chain(chain, model, args)
     sensors = None if args.sensor is None else _labels(args.sensor, "--sensor")
     grid = None
     if sensors is not None:  # the sensors' force on a grid over the pulse's passage (and, loaded, its reflection)
-        t_end = gc.default_t_max(chain) if chain.static_force > 0 else 2.5 * chain.size + 20.0
+        t_end = passage_time(chain)
         grid = np.arange(0.0, t_end, 0.01)
     plot = pulse_plot_request(args, chain, grid, sensors)  # --plot: checked before the run; the grid (and gauges) it needs
     result = gc.simulate(chain, _integrator(args), t_grid=grid if plot is None else plot.grid,

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..backends import batch_chain
-from ..ensembles.run import ensemble_integrator
 from ..model.chainmodel import ChainModel
+from ..solve import defaults as _defaults
 from ..solve.integrators import DP5, RunControls, get_integrator
 from ..solve.simulation import simulate, time_limit
 from .objectives import Objective, get_objective
@@ -119,13 +119,14 @@ def _statistic(values: np.ndarray, statistic) -> tuple:
 
 def default_integrator(space, contact=None):
     """Decorated chains: the ensembles' method and tolerances (``RKN4.relaxed`` at
-    :data:`granchain.ENSEMBLE_RTOL`; light granules set its step, :func:`granchain.ensemble_integrator`),
+    :data:`granchain.ENSEMBLE_RTOL`; light granules set its step,
+    :func:`granchain.solve.defaults.default_integrator`),
     every granule integrated to the end (a design's objective may read any granule or contact, and its
     chains are short); every other chain, and every chain whose contact law dissipates (RKN4 integrates
     forces of positions only): ``DP5()``, :func:`granchain.simulate`'s default, so that a reported value
     is exactly what ``simulate(space.chain(best))`` gives."""
     if space.chain_kind == "decorated" and (contact is None or contact.conservative):
-        return ensemble_integrator("decorated", windowed=False)
+        return _defaults.default_integrator(_defaults.LIGHT_GRANULES, windowed=False)
     return DP5()
 
 
@@ -146,7 +147,7 @@ class BatchEvaluator:
     """``evaluator(X)`` -> :class:`Evaluation` of the designs X (P, D) of ``space`` for ``objective``.
 
     ``integrator``: default the ensembles' for the space's chain kind
-    (:func:`granchain.ensemble_integrator`); ``statistic``: "mean" or a quantile, for random spaces;
+    (:func:`default_integrator`); ``statistic``: "mean" or a quantile, for random spaces;
     ``client``: a ``dask.distributed.Client`` (one batch per worker); ``workers``: a map-like callable
     ``workers(func, parts)`` (or a Dask client), ``parts`` the generation split into ``parts`` batches
     (default: as many as this machine has cores); ``backend``: None or "cpu" (default), the integrator's own
@@ -195,7 +196,7 @@ class BatchEvaluator:
         if integrator is None and methods is not None and self.integrator.name not in methods and contact is None:
             # a backend without a kernel for the default (the GPU runs RKN4 alone): the decorated chains' method,
             # every granule to the end, valid for every elastic chain (recorded in describe())
-            self.integrator = ensemble_integrator("decorated", windowed=False)
+            self.integrator = _defaults.default_integrator(_defaults.LIGHT_GRANULES, windowed=False)
         self.statistic = _check_statistic(statistic)
         self.client = client
 

@@ -9,8 +9,8 @@ writers.
 """
 
 from .read import open_store
-from .run import EnsembleSpec, default_time_grid, ensemble_integrator, run_ensemble
+from .run import EnsembleSpec, default_time_grid, ensemble_integrator, family_integrator, run_ensemble
 from .verify import StoreDamagedError, StoreVerificationWarning
 
 __all__ = ["EnsembleSpec", "StoreDamagedError", "StoreVerificationWarning", "default_time_grid", "ensemble_integrator",
-           "open_store", "run_ensemble"]
+           "family_integrator", "open_store", "run_ensemble"]

@@ -32,9 +32,8 @@ def integrators_as_run(spec) -> dict:
     """{chain kind: the record of its integrator as it runs on the family's chains}
     (``granchain.backends.integrator_as_run``): derived from the parameters, so not compared on resume."""
     from ..backends import integrator_as_run
-    from ..model.contacts import FreeEnd, LoadedEnd, FixedWall
 
-    boundary = FixedWall if spec.family.wall else (LoadedEnd if spec.family.static_force > 0 else FreeEnd)
+    boundary = spec.family.model.boundary
     law = spec.family.contact_law
     return {kind: integrator_as_run(integ, boundary, law) for kind, integ in spec.chain_integrators.items()}
 

@@ -73,10 +73,8 @@ def window_lag(integrator, family) -> int:
     """The trailing window's lag (in observed granules) of ``integrator`` as it runs on the family's
     chains (0: it has none, or the family's boundary switches it off)."""
     from ..backends import effective_integrator
-    from ..model.contacts import FreeEnd, LoadedEnd, FixedWall
 
-    boundary = FixedWall if family.wall else (LoadedEnd if family.static_force > 0 else FreeEnd)
-    ran = effective_integrator(integrator, boundary)
+    ran = effective_integrator(integrator, family.model.boundary)
     return int(getattr(ran, "window_lag", None) or 0)
 
 

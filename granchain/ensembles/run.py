@@ -24,7 +24,9 @@ from .._validate import count
 from .._version import RESULTS_VERSION
 from ..families import ChainFamily, RandomDecorated
 from ..model.chain import HERTZ
-from ..solve.integrators import DP5, RKN4, Integrator, RunControls, get_integrator
+from ..solve.defaults import (DAMPED_ATOL, DAMPED_RTOL, ENSEMBLE_ATOL, ENSEMBLE_RTOL, LIGHT_GRANULES, RANDOM_ATOL,
+                              RANDOM_RTOL, REFLECTING, SMOOTH, SMOOTH_ATOL, SMOOTH_RTOL, default_integrator)
+from ..solve.integrators import DP5, Integrator, RunControls, get_integrator
 from ..solve.simulation import linear_crossing_time, time_limit
 from . import backend as _backend
 from . import pulse_window as _window
@@ -32,80 +34,30 @@ from .pulse_window import AUTO, FULL
 from .store import MemorySink, Variable, ZarrSink, _check_out, check_same_family
 
 __all__ = ["EnsembleSpec", "EnsembleInterrupted", "run_ensemble", "default_time_grid", "ENSEMBLE_RTOL", "ENSEMBLE_ATOL",
-           "DAMPED_RTOL", "DAMPED_ATOL", "ensemble_integrator"]
-
-#: Ensemble defaults: the relaxed zone behind the pulse and the trailing window (:meth:`DP5.windowed`;
-#: :meth:`DP5.relaxed`, every granule to the end, with ``pulse_window="full"``), with the
-#: Runge-Kutta-Nystrom pair :class:`RKN4` at ENSEMBLE_RTOL / ENSEMBLE_ATOL for decorated chains and DP5
-#: at SMOOTH_RTOL / SMOOTH_ATOL for their effective chains; DP5 at RANDOM_RTOL / RANDOM_ATOL without the
-#: relaxed zone for every other chain kind (polydisperse, binary, a user's).
-#: Per-realisation peaks then stay within 1e-6 (relative; times within 1e-5) of DOP853 at rtol 1e-10
-#: (tests/test_window.py), far below the ensemble's statistical error (~1e-3 for 30,000
-#: realisations). Why two: in a decorated chain the light granules' oscillations set the step; RKN4
-#: takes ~0.9x DP5's steps there at half the force evaluations each (1.3-1.5x less time per N = 26
-#: realisation), with peak velocities as accurate as DP5's at rtol 1e-6 (at the free end of N = 6 chains
-#: more: in the 5 realisations of the paper's set checked where DP5 missed DOP853 by 1.2e-6 to 1.9e-6,
-#: within 6e-8); its peak contact forces set its tolerance (see ``RKN4.goal_tolerances``).
-#: A chain without light granules takes long steps, its error accumulates along the chain and it needs
-#: a tight tolerance (DP5 at rtol 1e-6 puts its peaks up to ~5e-6 off); there a 4th-order method
-#: gains nothing.
-#:
-#: Each tolerance is the loosest tried whose worst error stays within half the contract, on the chains
-#: of ``benchmarks/validate_tolerances.py`` (2026-11-27): 100 random N = 26 chains (and, decorated, the
-#: paper set's two stored worst cases) against DOP853 at rtol 1e-12, and 2,000 more against exact DP5
-#: at rtol 1e-10 / 1e-11 (the tail: the worst of 2,000 chains was 1.2x to 3.3x the worst of 100).
-#: Half, because the paper's set has 120,000 realisations of each kind, 57x the chains checked.
-ENSEMBLE_RTOL, ENSEMBLE_ATOL = RKN4.goal_tolerances  # 3e-6, 3e-9 (1e-5, 1e-8 until 2026-11-27)
-#: The effective chains' (``DP5.windowed``): their worst error is the last granule's peak velocity
-#: (the free end), in rare chains and not smoothly in rtol. Worst fraction of the contract on the 100 /
-#: 2,000 chains: rtol 5e-8 (the default until then) 0.86 / **1.58**, missed on 0 / 6 chains; 3e-8
-#: 0.35 / 1.05; 2e-8 0.40 / 1.33; 1e-8 **0.21 / 0.44**; 5e-9 0.09 / 0.19. On the paper's own set (30,000
-#: realisations at each N = 6, 11, 16, 26, the stored peaks against exact DP5 at rtol 1e-11) rtol 5e-8
-#: missed the contract on 170 of the 120,000 realisations (up to 2.97x, all at the last granule's peak
-#: velocity), rtol 1e-8 on none (worst 0.66, N = 6). Cost: 1.39x the steps of rtol 5e-8 (N = 26).
-SMOOTH_RTOL = 1e-8
-SMOOTH_ATOL = 1e-11
-#: DP5's tolerances for the chain kinds other than the paper's two (random polydisperse and binary
-#: chains, a user's family), integrated without the relaxed zone: waves reflected at every change of
-#: mass give some granules their largest velocity after the front has moved on, where the relaxed zone
-#: loosens the tolerance (``DP5.relaxed(5e-8, 5e-11)``, then the effective chains' default, missed the
-#: peak-velocity contract by up to 18x and 54x on a quarter of 100 random polydisperse and binary chains
-#: of 26 granules). At this rtol the worst of those chains is at 0.19 and 0.31 of the contract (1e-8: up
-#: to 2.0x; 5e-9: up to 1.24x), for about twice the CPU (``benchmarks/validate_tolerances.py``,
-#: 2026-11-25; not checked on the tail beyond those 100 chains).
-RANDOM_RTOL = 2e-9
-RANDOM_ATOL = 2e-12
-#: DP5's tolerances for decorated chains with a viscoelastic contact law (RKN4 integrates x'' = f(x) only):
-#: the rtol at which DP5's peak velocities matched RKN4's at rtol 1e-5 on elastic decorated chains. Not
-#: validated on viscoelastic chains; on elastic ones ``DP5.windowed(1e-6)`` meets the contract with
-#: less margin than the default RKN4 (worst 0.41 of it on the 102 chains of validate_tolerances, 0.67 on
-#: the 2,000 more; rtol 3e-7: 0.21 / 0.23).
-DAMPED_RTOL = 1e-6
-DAMPED_ATOL = 1e-9
+           "SMOOTH_RTOL", "SMOOTH_ATOL", "RANDOM_RTOL", "RANDOM_ATOL", "DAMPED_RTOL", "DAMPED_ATOL", "ensemble_integrator",
+           "family_integrator"]
 
 
 def ensemble_integrator(chain: str = "decorated", *, conservative: bool = True, windowed: bool = True) -> Integrator:
-    """The ensembles' default integrator for a chain kind: ``RKN4.windowed()`` at
-    :data:`ENSEMBLE_RTOL`, :data:`ENSEMBLE_ATOL` for "decorated" chains, :meth:`DP5.windowed` at
-    :data:`SMOOTH_RTOL`, :data:`SMOOTH_ATOL` for "effective" ones (their accuracy contract is in
-    ``DP5``), and ``DP5`` at :data:`RANDOM_RTOL`, :data:`RANDOM_ATOL` without the relaxed zone for every
-    other kind (see :data:`RANDOM_RTOL`). For a contact law that is not ``conservative`` (viscoelastic:
-    forces depend on velocities), decorated chains get :meth:`DP5.relaxed` at :data:`DAMPED_RTOL`,
-    :data:`DAMPED_ATOL`, windowed or not: the granules behind the pulse keep rattling and dissipating
-    until the end, and a granule the trailing window drops stops dissipating (9 % of the dissipated
-    energy lost on a 40-granule chain: docs, "Real contacts"), so every granule is integrated to the end.
+    """The default integrator of :class:`RandomDecorated`'s chain kinds by name: "decorated" chains are
+    :data:`~granchain.solve.defaults.LIGHT_GRANULES`, "effective" ones
+    :data:`~granchain.solve.defaults.SMOOTH`, and any other name
+    :data:`~granchain.solve.defaults.REFLECTING` (:func:`granchain.solve.defaults.default_integrator`:
+    ``RKN4.windowed()`` at :data:`ENSEMBLE_RTOL`, :meth:`DP5.windowed` at :data:`SMOOTH_RTOL`, ``DP5`` at
+    :data:`RANDOM_RTOL`; ``DP5.relaxed`` at :data:`DAMPED_RTOL` for decorated chains whose contacts are not
+    ``conservative``). An ensemble asks its family instead (:meth:`ChainFamily.character`), which
+    knows what its chains are like whatever their names. ``windowed``: the trailing window (False:
+    ``relaxed``, every granule integrated to the end of the time grid)."""
+    character = {"decorated": LIGHT_GRANULES, "effective": SMOOTH}.get(chain, REFLECTING)
+    return default_integrator(character, conservative=conservative, windowed=windowed)
 
-    ``windowed``: the trailing window, with which a realisation costs linearly in the chain's length
-    (the ensembles give each observed granule its averaged-pulse window: ``run_ensemble(pulse_window=
-    "auto")``, :mod:`granchain.ensembles.pulse_window`); False: ``relaxed`` instead of ``windowed``,
-    every granule integrated to the end of the time grid (the wake behind the pulse included; the
-    defaults before granchain 0.5)."""
-    zone = (lambda cls: cls.windowed) if windowed else (lambda cls: cls.relaxed)
-    if chain == "decorated":
-        return zone(RKN4)(ENSEMBLE_RTOL, ENSEMBLE_ATOL) if conservative else DP5.relaxed(DAMPED_RTOL, DAMPED_ATOL)
-    if chain == "effective":
-        return zone(DP5)(SMOOTH_RTOL, SMOOTH_ATOL)
-    return DP5(RANDOM_RTOL, RANDOM_ATOL)
+
+def family_integrator(family: ChainFamily, chain: str, *, windowed: bool = True, method: type | None = None) -> Integrator:
+    """The integrator the family's ``chain`` kind is integrated with unless one is given: that of its
+    character (:meth:`ChainFamily.character`, :func:`granchain.solve.defaults.default_integrator`), for the
+    family's contacts; ``method``: another adaptive Runge-Kutta class at the character's settings."""
+    return default_integrator(family.character(chain), conservative=family.model.conservative, windowed=windowed,
+                              method=method)
 
 
 def default_time_grid(family=26, dt: float = 0.1) -> np.ndarray:
@@ -140,7 +92,7 @@ class EnsembleSpec:
     controls: RunControls = field(default_factory=RunControls)
     lags: np.ndarray = field(default=None, repr=False)
     #: {chain kind: Integrator}; filled from ``integrator`` (one for all kinds) or, without one, from
-    #: each kind's :func:`ensemble_integrator`. Given explicitly, it wins over ``integrator``.
+    #: each kind's :func:`family_integrator` (the default of its character). Given explicitly, it wins over ``integrator``.
     chain_integrators: dict | None = None
     #: "auto": each observed granule's averaged pulse in a window of its own, for the chain kinds whose
     #: integrator runs a trailing window (the defaults; :mod:`granchain.ensembles.pulse_window`); "full":
@@ -190,16 +142,14 @@ class EnsembleSpec:
             per_chain = {c: get_integrator(self.chain_integrators[c]) for c in self.chains}
         else:
             given = self.integrator
-            conservative = self.family.model.conservative
             windowed = self.pulse_window == AUTO
-            per_chain = {c: (get_integrator(given) if given is not None
-                             else ensemble_integrator(c, conservative=conservative, windowed=windowed))
+            per_chain = {c: (get_integrator(given) if given is not None else family_integrator(self.family, c, windowed=windowed))
                          for c in self.chains}
-            # A backend that runs fewer methods (the GPU: RKN4 alone) gets the decorated chains' default,
+            # A backend that runs fewer methods (the GPU: RKN4 alone) gets the light-granule chains' default,
             # RKN4, for the kinds whose default it has no kernel for: valid for every elastic chain.
             methods = getattr(_backend.resolve(_backend.checked(self.backend)), "methods", None)
             if given is None and methods is not None:
-                fallback = ensemble_integrator("decorated", conservative=conservative, windowed=windowed)
+                fallback = default_integrator(LIGHT_GRANULES, conservative=self.family.model.conservative, windowed=windowed)
                 per_chain = {c: (i if i.name in methods else fallback) for c, i in per_chain.items()}
         law = self.family.contact_law
         for c, integ in per_chain.items():  # refused here, before a store exists
@@ -438,7 +388,7 @@ def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
         batch = family.build(params, name)
         masses, stiffness, v0 = batch.masses, batch.stiffness, batch.initial_velocity
         t_max = max(time_limit(masses.shape[1], float(v0.min()), batch.n), float(spec.t_grid[-1]))
-        if family.static_force > 0:
+        if not family.model.ends_at_exit:
             # No exit to stop at: each row runs to its own time bounding the pulse's crossing, as
             # simulate's default_t_max on the grid, so that a row does not depend on its chunk.
             rows = [time_limit(masses.shape[1], float(v), batch.n) for v in v0]
@@ -511,7 +461,7 @@ def _integrator_of(integrator, rtol, atol, windowed: bool = True) -> Integrator 
         return integrator
     if integrator is None:
         if rtol is None and atol is None:
-            return None  # each chain kind's default (ensemble_integrator)
+            return None  # each chain kind's default (family_integrator)
         # the one not given: DP5's goal tolerance (1e-6 or 1e-9)
         return DP5.windowed(rtol, atol) if windowed else DP5.relaxed(rtol, atol)
     if rtol is not None or atol is not None:
@@ -568,9 +518,10 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
         naming one for each of ``chains`` (it may also name other kinds of the family, which this
         run does not use, so one dict serves runs of either chain; a kind the family does not have,
         or a computed kind without an integrator, is refused). Default: when ``out`` is an existing
-        store, the integrators it was started with; else :func:`ensemble_integrator`
-        of each kind (``RKN4.windowed`` at :data:`ENSEMBLE_RTOL` for decorated chains, ``DP5.windowed``
-        at :data:`SMOOTH_RTOL` for effective ones, ``relaxed`` instead of ``windowed`` with
+        store, the integrators it was started with; else the default of each kind's character, which the
+        family names (:meth:`ChainFamily.character`, :func:`family_integrator`: ``RKN4.windowed`` at
+        :data:`ENSEMBLE_RTOL` for decorated chains, whose light granules set the step, ``DP5.windowed`` at
+        :data:`SMOOTH_RTOL` for effective ones, ``relaxed`` instead of ``windowed`` with
         ``pulse_window="full"``; ``DP5`` at :data:`RANDOM_RTOL` for the others), or
         ``DP5.windowed(rtol, atol)`` (``DP5.relaxed`` with ``pulse_window="full"``) for all if
         ``rtol``/``atol`` are given (the other one then 1e-6 or 1e-9). ``granchain.DP5(1e-6, 1e-9)`` is

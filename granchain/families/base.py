@@ -120,6 +120,17 @@ class ChainFamily:
         """Names of the chains the family builds for one realisation (first: the exact chain)."""
         raise NotImplementedError
 
+    def character(self, chain: str) -> str:
+        """What the family's ``chain`` kind is like for an integrator, which picks its default method and
+        tolerances (``granchain.solve.defaults``): "light granules" (light granules between heavy ones set
+        the step: the paper's decorated chains), "smooth" (masses that change slowly, no light granules:
+        the effective chains) or "reflecting" (masses that jump at random along the chain, whose reflected
+        waves give granules their peak after the front has passed). This one: "reflecting", the safe
+        choice for any chain (a tighter tolerance, no relaxed zone); a family of other chains says so."""
+        if chain not in self.chains:
+            raise ValueError(f"{type(self).__name__} builds the chains {list(self.chains)}, not {chain!r}")
+        return "reflecting"
+
     @property
     def size(self) -> int:
         """Granules M of the exact chain."""

@@ -66,6 +66,7 @@ class CustomFamily(ChainFamily):
     n: float
     returns_chain: bool = field(repr=False)
     _probe: Chain = field(repr=False, compare=False)
+    _model: ChainModel = field(repr=False, compare=False)
 
     kind: ClassVar[str] = "custom"
 
@@ -81,6 +82,7 @@ class CustomFamily(ChainFamily):
         object.__setattr__(self, "returns_chain", None)
         probe = self._make_chain(np.random.default_rng(0), "the probe call build(numpy.random.default_rng(0))")
         object.__setattr__(self, "_probe", probe)
+        object.__setattr__(self, "_model", ChainModel.of_chain(probe))  # (asked for every chunk and record)
 
     def _make_chain(self, rng, where: str) -> Chain:
         out = self.build_fn(rng)
@@ -147,7 +149,7 @@ class CustomFamily(ChainFamily):
     def model(self) -> ChainModel:
         """The physics of the chains the function returns (that of the first call: every realisation must
         have the same), as one value."""
-        return ChainModel.of_chain(self._probe)
+        return self._model
 
     @property
     def contact(self):

@@ -75,6 +75,12 @@ class _Decorated(ChainFamily):
     def chains(self) -> tuple:
         return ("decorated", "effective")
 
+    def character(self, chain: str) -> str:
+        """The decorated chain's light granules set the step; its effective chain is smooth (see
+        :meth:`ChainFamily.character`)."""
+        super().character(chain)
+        return "light granules" if chain == "decorated" else "smooth"
+
     @property
     def size(self) -> int:
         return 2 * self.n_large - 1

@@ -1,10 +1,12 @@
 """The model: what a chain *is*, as values, before anything integrates it.
 
 - :mod:`~granchain.model.contacts`: the contact law (:class:`ContactLaw`: :class:`PowerLaw`, paper Eq. hertz-1,
-  and the dissipative :class:`Viscoelastic`), the static load (:class:`Precompression`), the far boundary
-  (:class:`FreeEnd`, :class:`LoadedEnd`, :class:`FixedWall`) and the initial state (:class:`Impulse`,
-  :class:`Striker`), small frozen values that declare the assumptions they license (forces depend on
-  positions only, the granules ahead of the pulse are exactly at rest, the pulse leaves for good);
+  the dissipative :class:`Viscoelastic` and :class:`Viscous`, the yielding :class:`ElasticPlastic`);
+- :mod:`~granchain.model.conditions`: the static load (:class:`Precompression`), the far boundary
+  (:class:`FreeEnd`, :class:`LoadedEnd`, :class:`FixedWall`; :func:`far_end`, :func:`ends_at_exit`) and the
+  initial state (:class:`Impulse`, :class:`Striker`); these and the laws are small frozen values that
+  declare the assumptions they license (forces depend on positions only, the granules ahead of the pulse
+  are exactly at rest, the pulse leaves for good), all exported by ``contacts`` and here;
 - ``granchain.model.chainmodel``: :class:`~granchain.ChainModel`, the values above that a family of
   chains shares (law, static load, striker, wall), as one value;
 - :mod:`~granchain.model.collision`: the two-body collision of the viscoelastic law (its coefficient

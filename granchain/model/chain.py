@@ -37,8 +37,8 @@ import numpy as np
 
 from .._validate import count, exponent, finite_scalar, positive_array
 from .chainmodel import ChainModel
-from .contacts import (MIN_DYNAMIC_RATIO, ContactLaw, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, FixedWall, Striker,
-                       Viscoelastic, checked_law)
+from .contacts import (MIN_DYNAMIC_RATIO, ContactLaw, FixedWall, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, Striker,
+                       Viscoelastic, checked_law, ends_at_exit, far_end)
 
 __all__ = [
     "Chain",
@@ -189,11 +189,7 @@ class Chain:
         object.__setattr__(self, "static_force", load.force)
         object.__setattr__(self, "striker", striker)
         object.__setattr__(self, "precompression", load)
-        if wall:
-            boundary = FixedWall(float(c[-1]))
-        else:
-            boundary = LoadedEnd(load.force) if load.force > 0 else FreeEnd()
-        object.__setattr__(self, "boundary", boundary)
+        object.__setattr__(self, "boundary", far_end(wall, load).of(c, load))
         if striker:
             r0 = None if radii is None else float(radii[0])
             object.__setattr__(self, "initial", Striker(v0, 0, float(m[0]), r0))
@@ -221,14 +217,14 @@ class Chain:
     def elastic(self) -> bool:
         """The paper's chain: power-law contacts without damping or static load (a striker and
         materials change masses and stiffnesses only)."""
-        return self.contact.conservative and self.static_force == 0.0
+        return self.contact.conservative and not self.precompression.applied
 
     @property
     def ends_at_exit(self) -> bool:
         """Whether a run can end at the pulse's exit (or its return from a wall): not for a
         precompressed chain, whose loaded contacts do not open (it runs to a time instead,
         ``granchain.solve.simulation.default_t_max``)."""
-        return self.boundary.has_exit and self.static_force == 0.0
+        return ends_at_exit(type(self.boundary), self.precompression)
 
     @property
     def overlaps(self) -> np.ndarray:
@@ -424,7 +420,7 @@ class Chain:
         extras = ""
         if self.contact.label():
             extras += f", {self.contact.label(6, '=')}"
-        if self.static_force > 0:
+        if self.precompression.applied:
             extras += f", static_force={self.static_force:.6g}"
         if self.striker:
             extras += f", striker of mass {self.masses[0]:.6g}"

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import finite_scalar
-from .contacts import ContactLaw, PowerLaw, Precompression, checked_law, law_from_record
+from .contacts import ContactLaw, PowerLaw, Precompression, checked_law, ends_at_exit, far_end, law_from_record
 
 __all__ = ["ChainModel"]
 
@@ -59,7 +59,7 @@ class ChainModel:
         law = checked_law(self.contact, n, owner)
         if isinstance(law, PowerLaw):
             law = None
-        if self.static_force > 0 and n <= 1.0:
+        if self.precompression.applied and n <= 1.0:
             raise ValueError(f"precompression needs an exponent n > 1, got n = {n:g}")
         return ChainModel(law, self.static_force, self.striker_mass, self.wall)
 
@@ -82,7 +82,19 @@ class ChainModel:
     @property
     def elastic(self) -> bool:
         """The paper's contacts: the power law, no static load, no striker (a wall aside)."""
-        return self.contact is None and self.static_force == 0.0 and self.striker_mass is None
+        return self.contact is None and not self.precompression.applied and self.striker_mass is None
+
+    @property
+    def boundary(self) -> type:
+        """The kind of the chains' far end (``FixedWall``, ``LoadedEnd`` or ``FreeEnd``, the class: a wall's
+        stiffness is each chain's), which says whether goal-oriented error control is licensed."""
+        return far_end(self.wall, self.precompression)
+
+    @property
+    def ends_at_exit(self) -> bool:
+        """Whether the chains' runs can end at the pulse's exit (not under a static load: they run to a
+        time bounding the pulse's crossing instead)."""
+        return ends_at_exit(self.boundary, self.precompression)
 
     @property
     def conservative(self) -> bool:
@@ -111,7 +123,7 @@ class ChainModel:
         (the chain families build it into the arrays)."""
         if self.striker_mass is not None:
             chain = chain.with_striker(mass=self.striker_mass)
-        if self.contact is not None or self.static_force > 0:
+        if self.contact is not None or self.precompression.applied:
             chain = chain.replace(contact=self.law(chain.n), static_force=self.static_force)
         return chain
 
@@ -122,7 +134,7 @@ class ChainModel:
         out = {"wall": True} if self.wall else {}
         if self.contact is not None:
             out["contact"] = self.contact.describe()
-        if self.static_force > 0:
+        if self.precompression.applied:
             out["static_force"] = self.static_force
         if self.striker_mass is not None:
             out["striker_mass"] = self.striker_mass
@@ -144,7 +156,7 @@ class ChainModel:
         parts = ["against a fixed wall"] if self.wall else []
         if self.contact is not None:
             parts.append(self.contact.label(4))
-        if self.static_force > 0:
+        if self.precompression.applied:
             parts.append(f"precompressed F0 = {self.static_force:.4g}")
         if self.striker_mass is not None:
             parts.append(f"striker of mass {self.striker_mass:.4g}")

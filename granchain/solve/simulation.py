@@ -161,7 +161,7 @@ class PulseResult:
             f"{self.status.name} ({self.message}); t_end = {self.t_end:.4g}, steps = {self.n_steps} "
             f"(+{self.n_rejected} rejected), energy error {self.energy_error:.2e}, "
             + (f"dissipated {self.dissipated_energy:.6g}, " if self.chain.contact.dissipates else "")
-            + (f"static force {self.chain.static_force:.6g}, " if self.chain.static_force > 0 else "")
+            + (f"static force {self.chain.static_force:.6g}, " if self.chain.precompression.applied else "")
             + (f"momentum error {self.momentum_error:.2e}" if not self.chain.wall else
                f"wall: peak force {self.peak_wall_force:.9g} at t = {self.peak_wall_force_time:.6f}, impulse {self.wall_impulse:.9g}")
         )
@@ -230,7 +230,7 @@ def default_t_max(chain: Chain) -> float:
     the two limits.
     """
     limit = time_limit(chain.size, chain.initial_velocity, chain.n)
-    if chain.static_force > 0:
+    if not chain.ends_at_exit:
         limit = min(limit, 2.0 * float(linear_crossing_time(chain.masses, chain.stiffness, chain.n, chain.static_force)) + 20.0)
     return limit
 

@@ -100,7 +100,7 @@ class CudaBackend(Backend):
             raise ValueError(f"the cuda backend runs RKN4 (granchain.RKN4) alone, not {integrator.name}{cpu}")
         if integrator.fixed_step:
             raise ValueError(f"the cuda backend runs RKN4 with step control, not with a fixed step{cpu}")
-        if chain.static_force > 0:
+        if chain.precompression.applied:
             raise ValueError(f"the cuda backend has no kernel for precompressed chains{cpu}")
         if not chain.initial.rest_ahead:
             raise ValueError(f"the cuda backend starts every granule but the first at rest; the initial state "
