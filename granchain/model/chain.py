@@ -93,7 +93,7 @@ class Chain:
         :meth:`with_dissipation` sets a viscoelastic one.
     static_force : float
         The precompression F0 >= 0 (rescaled force units; 0: none, the paper's chain;
-        :meth:`with_precompression`, :class:`granchain.model.contacts.Precompression`).
+        :meth:`with_precompression`, :class:`granchain.Precompression`).
     striker : bool
         Granule 0 of the arrays is a striker, the struck body in front of granule 1
         (:meth:`with_striker`): not observed by default, and the granule labels
@@ -103,7 +103,7 @@ class Chain:
     ----------
     contact : granchain.model.contacts.ContactLaw
         The contact law.
-    precompression : granchain.model.contacts.Precompression
+    precompression : granchain.Precompression
         The static load (force 0 without one).
     boundary : FreeEnd, LoadedEnd or FixedWall (granchain.model.contacts)
         The far end: a wall when the last mass is infinite; held by the static force
@@ -253,7 +253,7 @@ class Chain:
 
     def with_precompression(self, force) -> "Chain":
         """The same chain under a static compressive force F0 = ``force`` (rescaled force units; see
-        :class:`granchain.model.contacts.Precompression` for the boundary convention: the load at the
+        :class:`granchain.Precompression` for the boundary convention: the load at the
         struck end, held at the far end by the wall if there is one, else by the same force).
 
         ``force`` may be a quantity with units (``"2 N"``) only through ``granchain.units``
