@@ -477,6 +477,28 @@ def test_cli_families_write_the_api_result(tmp_path, capsys, args, family, integ
 
 
 @pytest.mark.parametrize(
+    "args, expected",
+    [
+        # the family's defaults; "relaxed" error control only where a kind's default has a relaxed zone
+        (["--family", "polydisperse", "--size", "6", "--error-control", "relaxed"],
+         {"polydisperse": gc.DP5(gc.RANDOM_RTOL, gc.RANDOM_ATOL)}),
+        (["--large", "4", "--error-control", "relaxed"],
+         {"decorated": gc.RKN4.relaxed(gc.ENSEMBLE_RTOL, gc.ENSEMBLE_ATOL), "effective": gc.DP5.relaxed(gc.SMOOTH_RTOL, gc.SMOOTH_ATOL)}),
+        # a named method at each kind's settings
+        (["--large", "4", "--integrator", "dp5"], {"decorated": gc.DP5.windowed(), "effective": gc.DP5.windowed(gc.SMOOTH_RTOL, gc.SMOOTH_ATOL)}),
+        (["--family", "binary", "--size", "6", "--integrator", "rkn4", "--error-control", "windowed"],
+         {"binary": gc.RKN4.windowed(gc.RANDOM_RTOL, gc.RANDOM_ATOL)}),
+    ],
+)
+def test_cli_integrators_are_the_family_defaults_with_the_options(tmp_path, capsys, args, expected):
+    store = tmp_path / "s.zarr"
+    code, out, err = _cli(capsys, "ensemble", *args, "--realizations", "2", "--quiet", "--out", str(store))
+    assert code == 0, err
+    got = ens.stored_integrators(store)
+    assert (got if isinstance(got, dict) else {next(iter(expected)): got}) == expected
+
+
+@pytest.mark.parametrize(
     "args, words",
     [
         (["--family", "binary", "--alpha", "0.1"], "--alpha/--beta do not apply"),

@@ -198,18 +198,15 @@ def build_integrator(args, family, chains):
              "windowed": {"relaxed_lag": RELAXED_LAG, "window_lag": WINDOW_LAG},
              "exact": {"relaxed_lag": None, "window_lag": None}}[args.error_control]
 
-    def default(kind):  # the kind's default, or the named method at that kind's settings
-        return family_integrator(family, kind, windowed=windowed, method=cls)
-
-    def goal(kind):
+    def with_zones(base):
         # A kind whose default has no relaxed zone (reflecting chains: their granules can peak after the
         # pulse has passed) keeps it without with "relaxed" too.
-        if zones is None or (args.error_control == "relaxed" and not default(kind).relaxed_lag):
-            return {}
-        return zones
+        if zones is None or (args.error_control == "relaxed" and not base.relaxed_lag):
+            return base
+        return dataclasses.replace(base, **zones)
 
-    if args.rtol is None and args.atol is None:  # each chain kind's default tolerances
-        return {c: dataclasses.replace(default(c), **goal(c)) for c in chains}
+    if args.rtol is None and args.atol is None:  # each kind's default, or the named method at its settings
+        return {c: with_zones(family_integrator(family, c, windowed=windowed, method=cls)) for c in chains}
     cls = cls or DP5  # --rtol/--atol alone set DP5's, as run_ensemble(rtol=..., atol=...) does
     base = cls.windowed() if windowed else cls.relaxed()  # as run_ensemble(rtol=..., pulse_window=...)
     return dataclasses.replace(base, **{k: v for k, v in given.items() if v is not None}, **(zones or {}))

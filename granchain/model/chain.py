@@ -152,7 +152,7 @@ class Chain:
         if striker and m.size - wall < 3:
             raise ValueError("a chain with a striker needs the striker and at least 2 granules")
         contact = PowerLaw(n) if self.contact is None else checked_law(self.contact, n)
-        load = self.static_force if isinstance(self.static_force, Precompression) else Precompression(self.static_force)
+        load = Precompression.of(self.static_force)
         ratio = load.resolvable(float(m[0]), float(c[0]), n, v0)
         if ratio < MIN_DYNAMIC_RATIO:
             raise ValueError(

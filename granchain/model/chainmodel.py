@@ -44,7 +44,7 @@ class ChainModel:
 
     def __post_init__(self):
         checked_law(self.contact)
-        load = self.static_force if isinstance(self.static_force, Precompression) else Precompression(self.static_force)
+        load = Precompression.of(self.static_force)
         object.__setattr__(self, "static_force", load.force)
         if self.striker_mass is not None:
             object.__setattr__(self, "striker_mass", finite_scalar("striker_mass", self.striker_mass, positive=True))

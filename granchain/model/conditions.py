@@ -78,6 +78,11 @@ class Precompression:
                 "resolvable, granchain.Chain)")
         object.__setattr__(self, "force", f)
 
+    @classmethod
+    def of(cls, load) -> "Precompression":
+        """``load`` as the static load's value: itself if it is one, else the static force F0 it gives (checked)."""
+        return load if isinstance(load, cls) else cls(load)
+
     @property
     def applied(self) -> bool:
         """Whether the chain is loaded (F0 > 0; 0 is the paper's unloaded chain)."""
