@@ -142,6 +142,27 @@ def test_common_random_numbers_shrink_the_variance_of_a_difference():
     assert var_crn < 0.5 * var_ind
 
 
+def test_the_space_names_its_chains_character_and_that_picks_the_default():
+    """The evaluator asks the space what its chains are like, not their name: decorated spaces have light
+    granules (RKN4 at the ensembles' tolerances, every granule to the end), other radii are "reflecting"
+    (``simulate``'s exact DP5), and a space whose class says its chains have light granules gets RKN4 whatever
+    it calls them; a dissipative law gets DP5 in any space."""
+    from granchain.solve.defaults import LIGHT_GRANULES, REFLECTING, default_integrator
+    decorated, tapered = design.DecoratedSpace(6), design.TaperedSpace(6, (0.0, 0.1))
+    assert (decorated.character, design.RandomDecoratedSpace(6).character, tapered.character) == (
+        LIGHT_GRANULES, LIGHT_GRANULES, REFLECTING)
+    light = default_integrator(LIGHT_GRANULES, windowed=False)
+    assert design.default_integrator(decorated) == light
+    assert design.default_integrator(tapered) == gc.DP5()
+
+    class LightTapered(design.TaperedSpace):
+        character = LIGHT_GRANULES
+
+    assert LightTapered(6, (0.0, 0.1)).chain_kind == "radii"
+    assert design.default_integrator(LightTapered(6, (0.0, 0.1))) == light
+    assert design.default_integrator(decorated, gc.Viscoelastic(0.1)) == gc.DP5()
+
+
 # ------------------------------------------------------------------------ objectives, spaces
 def test_objectives_agree_between_batch_and_simulate():
     """Every objective's batch value is simulate's (free end and wall)."""

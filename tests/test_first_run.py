@@ -151,11 +151,45 @@ def test_each_closure_made_by_a_kernel_factory_has_a_name_of_its_own():
     from granchain.backends.kernels import dense, dispatch, forces
 
     groups = [[dispatch.dp5_chain, dispatch.dp5_chain_general, dispatch.rkn4_chain, dispatch.rkn4_chain_general],
-              [dense._acceleration_root, dense._approach_root, dense._force_rate_root],
+              [dense._acceleration_root, dense._approach_root, dense._force_rate_root, dense._elastic_acceleration_root],
               [forces._accelerations_paper, forces._accelerations_general]]
     for group in groups:
         names = [f.py_func.__qualname__ for f in group]
         assert len(set(names)) == len(names), names
+
+
+LAW_PROBE = textwrap.dedent(
+    """
+    import json
+    import granchain as gc
+    from granchain.backends.kernels import dense, forces
+    helpers = {"dense_acceleration": dense.dense_acceleration, "dense_force": dense.dense_force,
+               "contact_law_force": forces.contact_law_force, "plastic_force": forces.plastic_force,
+               "force_rate": forces.force_rate, "elastic_acceleration": dense.elastic_acceleration}
+    def compiled():
+        return sorted(name for name, f in helpers.items() if f.signatures)
+    small = gc.decorated([0.05, 0.3, 0.012])
+    gc.simulate(small)
+    paper = compiled()
+    gc.simulate(small.with_dissipation(0.05))
+    print(json.dumps([paper, compiled()]))
+    """
+)
+
+
+@pytest.mark.slow
+def test_the_papers_chain_compiles_no_real_contact_law(tmp_path):
+    """With an empty cache, a first ``simulate`` of the paper's chain (elastic, unloaded) compiles the elastic
+    law's helpers alone: not the general acceleration and force on the dense output, nor the yielding or
+    viscoelastic laws, which its step loop never calls (each is compilation a newcomer's first run pays
+    for). Negative control: a damped chain next, in the same process, compiles them."""
+    import os
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"), GRANCHAIN_CACHE=str(tmp_path / "cache"))
+    out = subprocess.run([sys.executable, "-c", LAW_PROBE], capture_output=True, text=True, check=True, env=env)
+    paper, damped = json.loads(out.stdout.splitlines()[-1])
+    assert paper == ["elastic_acceleration"]
+    assert {"dense_acceleration", "dense_force", "contact_law_force", "force_rate"} <= set(damped)
 
 
 SWITCH_PROBE = textwrap.dedent(

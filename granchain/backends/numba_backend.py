@@ -174,9 +174,8 @@ class NumbaBackend(Backend):
         # (buffers the schema holds only for some chains, a wall or a dissipative law: the kernel writes them
         # for those alone, and gets scratch otherwise)
         R = masses.shape[0]
-        rows = Rows(out["peak_velocity"], out["peak_time"], out["peak_force"], out["peak_force_time"],
-                    out.get("peak_wall_force", np.full(R, np.nan)), out.get("peak_wall_force_time", np.full(R, np.nan)),
-                    out["status"], out["energy_error"], out["n_steps"], out["t_end"], out.get("dissipated_energy", np.zeros(R)))
+        scratch = {"peak_wall_force": np.nan, "peak_wall_force_time": np.nan, "dissipated_energy": 0.0}
+        rows = Rows(*(out[name] if name in out else np.full(R, scratch[name]) for name in Rows._fields))
         entry = chain_kernel(method.kind, params)
         warm.wait_for(entry)  # a helper process compiling it into the cache (a first run of both chains)
         kernel = kernel_function(entry, *row_records(batch, method, run, rows))

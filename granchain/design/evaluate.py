@@ -118,14 +118,14 @@ def _statistic(values: np.ndarray, statistic) -> tuple:
 
 
 def default_integrator(space, contact=None):
-    """Decorated chains: the ensembles' method and tolerances (``RKN4.relaxed`` at
-    :data:`granchain.ENSEMBLE_RTOL`; light granules set its step,
+    """Chains whose light granules set the step (``space.character``, decorated chains): the ensembles' method
+    and tolerances for them (``RKN4.relaxed`` at :data:`granchain.ENSEMBLE_RTOL`,
     :func:`granchain.solve.defaults.default_integrator`),
     every granule integrated to the end (a design's objective may read any granule or contact, and its
     chains are short); every other chain, and every chain whose contact law dissipates (RKN4 integrates
     forces of positions only): ``DP5()``, :func:`granchain.simulate`'s default, so that a reported value
     is exactly what ``simulate(space.chain(best))`` gives."""
-    if space.chain_kind == "decorated" and (contact is None or contact.conservative):
+    if space.character == _defaults.LIGHT_GRANULES and (contact is None or contact.conservative):
         return _defaults.default_integrator(_defaults.LIGHT_GRANULES, windowed=False)
     return DP5()
 

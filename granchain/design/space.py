@@ -21,6 +21,7 @@ import numpy as np
 
 from .._validate import count, finite_scalar
 from ..families import ChainBatch
+from ..solve.defaults import LIGHT_GRANULES, REFLECTING
 from ..model.chain import (
     HERTZ,
     Chain,
@@ -118,6 +119,13 @@ class DesignSpace:
     realizations: int = 1
     #: The kind of chain the batches hold ("decorated" chains get the decorated chains' integrator).
     chain_kind: str = "radii"
+
+    @property
+    def character(self) -> str:
+        """What the space's chains are like for step control, as a family says it (``ChainFamily.character``;
+        :data:`granchain.solve.defaults.CHARACTERS`): decorated chains have light granules between heavy ones,
+        which set the step; any other list of radii may jump at random ("reflecting")."""
+        return LIGHT_GRANULES if self.chain_kind == "decorated" else REFLECTING
 
     @property
     def dim(self) -> int:

@@ -16,6 +16,7 @@ through which ``simulate`` and ``run_ensemble`` reach any integrator; the test-s
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -205,10 +206,10 @@ class AdaptiveRK(StepControl, Integrator):
     #: The tolerances of :meth:`relaxed` and :meth:`windowed` (each method's own, validated).
     goal_tolerances: ClassVar[tuple]
 
-    @property
+    @functools.cached_property
     def step_control(self) -> StepControl:
         """The integrator's :class:`~granchain.solve.integrators.StepControl` (its step-control fields, as one
-        value)."""
+        value; made once per integrator, which is frozen: every run asks for it)."""
         return StepControl(*(getattr(self, f.name) for f in dataclasses.fields(StepControl)))
 
     @property

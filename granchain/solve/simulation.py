@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._status import Status, final_status
+from .._status import Status, final_status, peak_at_end
 from .._validate import finite_scalar
 from ..backends import integrator_as_run
 from ..model.chain import Chain
@@ -321,7 +321,8 @@ def simulate(chain: Chain, integrator=None, *, t_grid=None, t_max: float | None 
     # a granule still speeding up when a run meant to outlast the pulse stopped (its exit rule or time limit)
     # has no peak yet (e.g. behind a heavy striker); stop="t_max" asks for maxima up to a chosen time
     # instead, and exit_margin = 0 for the state at the very instant the pulse left
-    if stop == "exit" and controls.exit_margin > 0:
+    # (the final forces only when a peak lies at the end: what decides it, asked of every run)
+    if stop == "exit" and controls.exit_margin > 0 and peak_at_end(run.peak_time, run.t_end).any():
         status = final_status(status, run.peak_time, run.t_end, _accelerated(chain, x, v))
     if status != Status.SUCCESS:
         import warnings

@@ -138,13 +138,14 @@ class CudaBackend(Backend):
         res = self._run(integrator, chain, chain.masses[None], chain.stiffness[None], np.array([v[0]]),
                         chain.observed, t_grid, np.array([float(t_max)]), stop_at_exit, controls, None)
         info = np.zeros(INFO_SIZE)
-        info[INFO_T_END], info[INFO_STEPS], info[INFO_REJECTED] = res["t_end"][0], res["steps"][0], res["rejected"][0]
-        info[INFO_EXIT] = res["exit"][0]
-        info[INFO_WINDOW_START], info[INFO_FROZEN_POTENTIAL] = res["lo"][0], res["frozen"][0]
-        x[:], v[:] = res["x"][0], res["v"][0]
-        grid_f = res["grid_f"][0] if res["grid_f"] is not None else np.zeros(t_grid.size)
-        return (int(res["status"][0]), info, res["peak_v"][0], res["peak_t"][0], res["grid_v"][0], res["peak_f"][0],
-                res["peak_ft"][0], grid_f, np.zeros((t_grid.size, 0)))
+        info[INFO_T_END], info[INFO_STEPS] = res["t_end"][0], res["n_steps"][0]
+        info[INFO_REJECTED] = res["n_rejected"][0]
+        info[INFO_EXIT] = res["exit_time"][0]
+        info[INFO_WINDOW_START], info[INFO_FROZEN_POTENTIAL] = res["window_start"][0], res["frozen_potential"][0]
+        x[:], v[:] = res["positions"][0], res["velocities"][0]
+        grid_f = res["wall_force"][0] if res["wall_force"] is not None else np.zeros(t_grid.size)
+        return (int(res["status"][0]), info, res["peak_velocity"][0], res["peak_time"][0], res["velocity"][0],
+                res["peak_force"][0], res["peak_force_time"][0], grid_f, np.zeros((t_grid.size, 0)))
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
                         controls, scale: float, out: dict, model=None, pulse_end=None) -> None:
@@ -162,12 +163,14 @@ class CudaBackend(Backend):
         res = self._run(integrator, first, masses, stiffness, initial_velocity, observed, t_grid, limits,
                         first.ends_at_exit, controls, pulse_end, scale=scale, sums=out)
         wall = first.boundary.wall
-        out["peak_velocity"][:], out["peak_time"][:] = res["peak_v"], res["peak_t"]
+        out["peak_velocity"][:], out["peak_time"][:] = res["peak_velocity"], res["peak_time"]
         contacts = np.asarray(contacts, dtype=np.int64)
-        out["peak_force"][:], out["peak_force_time"][:] = res["peak_f"][:, contacts], res["peak_ft"][:, contacts]
+        out["peak_force"][:] = res["peak_force"][:, contacts]
+        out["peak_force_time"][:] = res["peak_force_time"][:, contacts]
         if wall:
-            out["peak_wall_force"][:], out["peak_wall_force_time"][:] = res["peak_f"][:, -1], res["peak_ft"][:, -1]
-        out["status"][:], out["n_steps"][:], out["t_end"][:] = res["status"], res["steps"], res["t_end"]
+            out["peak_wall_force"][:] = res["peak_force"][:, -1]
+            out["peak_wall_force_time"][:] = res["peak_force_time"][:, -1]
+        out["status"][:], out["n_steps"][:], out["t_end"][:] = res["status"], res["n_steps"], res["t_end"]
         out["energy_error"][:] = _energy_errors(first, masses, stiffness, initial_velocity, res)
         if "dissipated_energy" in out:
             out["dissipated_energy"][:] = 0.0
@@ -200,37 +203,36 @@ class CudaBackend(Backend):
         masses, stiffness, v0, t_max = masses[order], stiffness[order], np.asarray(v0)[order], np.asarray(t_max)[order]
         per = max(1, min(R, int(GRID_BYTES // max(1, T * K * 8))))
         const = [cuda.to_device(np.ascontiguousarray(a)) for a in (obs_of, observed, np.asarray(t_grid, float), ends, prm)]
-        res = {k: [] for k in ("peak_v", "peak_t", "peak_f", "peak_ft", "status", "steps", "rejected", "t_end", "exit",
-                               "lo", "frozen", "x", "v", "grid_v", "grid_f")}
+        # (each named as the results name it: ``RunRecord``, the ensembles' schema)
+        res = {k: [] for k in ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "status", "n_steps", "n_rejected",
+                               "t_end", "exit_time", "window_start", "frozen_potential", "positions", "velocities", "velocity",
+                               "wall_force")}
         elapsed = 0.0
         launches = 0
         for start in range(0, R, per):
             sl = slice(start, min(R, start + per))
             r = sl.stop - sl.start
             d_in = [cuda.to_device(np.ascontiguousarray(a[sl], dtype=float)) for a in (masses, stiffness, v0, t_max)]
-            shapes = {"peak_v": (r, K), "peak_t": (r, K), "peak_f": (r, M - 1), "peak_ft": (r, M - 1), "peak_d": (r, M - 1),
-                      "grid_v": (r, T, K), "grid_f": (r, T if wall else 1)}
+            shapes = {"peak_velocity": (r, K), "peak_time": (r, K), "peak_force": (r, M - 1), "peak_force_time": (r, M - 1),
+                      "peak_compression": (r, M - 1), "velocity": (r, T, K), "wall_force": (r, T if wall else 1)}
             d_out = {k: cuda.device_array(s, dtype=np.float64) for k, s in shapes.items()}
-            for k in ("status", "steps", "rejected", "lo"):
+            for k in ("status", "n_steps", "n_rejected", "window_start"):
                 d_out[k] = cuda.device_array(r, dtype=np.int64)
-            for k in ("t_end", "exit", "frozen"):
+            for k in ("t_end", "exit_time", "frozen_potential"):
                 d_out[k] = cuda.device_array(r, dtype=np.float64)
-            d_out["x"] = cuda.device_array((r, M), dtype=np.float64)
-            d_out["v"] = cuda.device_array((r, M), dtype=np.float64)
+            d_out["positions"] = cuda.device_array((r, M), dtype=np.float64)
+            d_out["velocities"] = cuda.device_array((r, M), dtype=np.float64)
             blocks, threads = (r, L) if L > 1 else (-(-r // BLOCK_THREADS), BLOCK_THREADS)
             cuda.synchronize()
             t0 = time.perf_counter()
-            kernel[blocks, threads](*d_in[:2], d_in[2], d_in[3], *const, d_out["peak_v"], d_out["peak_t"], d_out["peak_f"],
-                                    d_out["peak_ft"], d_out["peak_d"], d_out["grid_v"], d_out["grid_f"], d_out["status"],
-                                    d_out["steps"], d_out["rejected"], d_out["t_end"], d_out["exit"], d_out["lo"],
-                                    d_out["frozen"], d_out["x"], d_out["v"])
+            kernel[blocks, threads](*d_in[:2], d_in[2], d_in[3], *const, *(d_out[k] for k in KERNEL_OUTPUTS))
             if sums is not None and T and K:
                 d_sv = cuda.to_device(np.zeros((T, K), dtype=np.int64))
                 d_sv2 = cuda.to_device(np.zeros((T, K), dtype=np.int64))
-                make_sum_kernel_cached()[-(-(T * K) // 128), 128](d_out["grid_v"], d_out["status"], float(scale), d_sv, d_sv2)
+                make_sum_kernel_cached()[-(-(T * K) // 128), 128](d_out["velocity"], d_out["status"], float(scale), d_sv, d_sv2)
                 if wall:
                     d_sf = cuda.to_device(np.zeros(T, dtype=np.int64))
-                    make_wall_sum_kernel_cached()[-(-T // 128), 128](d_out["grid_f"], d_out["status"], float(scale), d_sf)
+                    make_wall_sum_kernel_cached()[-(-T // 128), 128](d_out["wall_force"], d_out["status"], float(scale), d_sf)
             cuda.synchronize()
             elapsed += time.perf_counter() - t0
             launches += 1
@@ -240,9 +242,9 @@ class CudaBackend(Backend):
                 if wall:
                     sums["sum_wall"] += d_sf.copy_to_host()
             for k in res:
-                if k == "grid_v" and sums is not None:
+                if k == "velocity" and sums is not None:
                     continue  # reduced on the device
-                if k == "grid_f" and (not wall or sums is not None):
+                if k == "wall_force" and (not wall or sums is not None):
                     continue
                 res[k].append(d_out[k].copy_to_host())
         self.timings.append({"kernel_s": elapsed, "realizations": R, "launches": launches})
@@ -252,6 +254,12 @@ class CudaBackend(Backend):
         joined["status"] = joined["status"].astype(np.int64)
         return joined
 
+
+#: The kernel's output arrays, in the order of its parameters (``kernel.make_kernel``), by the names the results
+#: give them (``peak_compression``: each contact's compression at its recorded peak, for the root screen).
+KERNEL_OUTPUTS = ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "peak_compression", "velocity",
+                  "wall_force", "status", "n_steps", "n_rejected", "t_end", "exit_time", "window_start",
+                  "frozen_potential", "positions", "velocities")
 
 def _longest_first(masses, stiffness) -> np.ndarray:
     """The rows in decreasing order of their fastest contact oscillation, max_j sqrt(c_j / min(m_j, m_j+1)):
@@ -288,12 +296,12 @@ def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
     (c / n) delta^n (Eq. hertz-1) of the contacts still integrated at the end, and the potential the
     contacts behind the window held when they left it; E_0 = m_1 v_0^2 / 2."""
     n = float(chain.n)
-    x, v, lo = res["x"], res["v"], res["lo"]
+    x, v, lo = res["positions"], res["velocities"], res["window_start"]
     finite = np.isfinite(masses)
     kinetic = 0.5 * np.sum(np.where(finite, masses, 0.0) * v * v, axis=1)
     d = np.maximum(x[:, :-1] - x[:, 1:], 0.0)
     integrated = np.arange(d.shape[1])[None, :] >= lo[:, None]
-    potential = np.sum(np.where(integrated, stiffness[:, : d.shape[1]] * d**n, 0.0), axis=1) / n + res["frozen"]
+    potential = np.sum(np.where(integrated, stiffness[:, : d.shape[1]] * d**n, 0.0), axis=1) / n + res["frozen_potential"]
     e0 = 0.5 * masses[:, 0] * v0 * v0
     with np.errstate(invalid="ignore"):
         return (kinetic + potential - e0) / e0

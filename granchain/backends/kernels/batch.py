@@ -99,9 +99,10 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     limit otherwise; ``run.t_max`` is not read): a precompressed chain,
     whose contacts never open).
 
-    Per realisation writes (``rows``, ``records.Rows``) peak_v[r, :], peak_t[r, :], status[r],
-    energy_error[r] ((E_end + E_dissipated - E_0)/E_0), dissipated[r] (E_dissipated), n_steps[r], t_end[r], the peak forces of the contacts
-    ``tally.contacts`` (0-based) into peak_f[r, :], peak_ft[r, :] and, for chains ending in a wall, the
+    Per realisation writes (``rows``, ``records.Rows``) peak_velocity[r, :], peak_time[r, :], status[r],
+    energy_error[r] ((E_end + E_dissipated - E_0)/E_0), dissipated_energy[r] (E_dissipated), n_steps[r], t_end[r],
+    the peak forces of the contacts ``tally.contacts`` (0-based) into peak_force[r, :], peak_force_time[r, :] and, for
+    chains ending in a wall, the
     wall's peak force and time into peak_wall_force[r], peak_wall_force_time[r] (untouched otherwise). Adds (``sums``,
     ``records.Sums``) round(v * scale) and round(v^2 * scale) of every successful realisation's
     observed velocities on ``t_grid`` into sum_v / sum_v2 (int64, (T, K)), with a wall
@@ -190,5 +191,5 @@ def row_records(batch, method, run, rows):
     params = Params(*batch.params)
     return (method, Model(batch.masses[0], batch.stiffness[0], params), run._replace(t_max=float(batch.t_max[0])),
             State(np.zeros(M), np.zeros(M), np.zeros(M - 1)),
-            Outputs(rows.peak_v[0], rows.peak_t[0], np.zeros((T, K)), np.zeros(M - 1), np.zeros(M - 1), np.zeros(T),
+            Outputs(rows.peak_velocity[0], rows.peak_time[0], np.zeros((T, K)), np.zeros(M - 1), np.zeros(M - 1), np.zeros(T),
                     np.zeros(INFO_SIZE), np.zeros((T, run.contacts.shape[0]))))

@@ -28,6 +28,9 @@ ROOT_ACCELERATION = 0
 ROOT_APPROACH = 1
 #: ... or the rate of a viscoelastic contact's force, which peaks before its compression does.
 ROOT_FORCE_RATE = 2
+#: ... or the acceleration of a granule of the paper's chain (elastic, unloaded): the search the paper's
+#: step loop compiles, without the real contacts' laws (:func:`elastic_acceleration`).
+ROOT_ELASTIC_ACCELERATION = 3
 
 
 @njit(**JIT_INTERNAL)
@@ -47,6 +50,25 @@ def dense_compression(j, x, Kx, h, Q):
 
 
 @njit(**JIT_INTERNAL)
+def elastic_dense_force(j, step, fm, Q, Qv):
+    """:func:`dense_force` of the paper's chain (elastic, unloaded): c_j delta^(n-1) (Eq. motion_rescaled), the
+    same arithmetic as the general law's for that chain."""
+    x, v, Kx, Kv, h = step
+    d = fm.overlap[j] + dense_compression(j, x, Kx, h, Q)
+    return contact_force(d, fm.stiffness[j], fm.params)
+
+
+@njit(**JIT_INLINE)
+def law_dense_force(general, j, step, fm, Q, Qv):
+    """The force of contact j on the dense output: :func:`dense_force`, or :func:`elastic_dense_force` for the
+    paper's chain (``general`` False, a constant where this is inlined: the paper's step loop compiles no
+    other law)."""
+    if general:
+        return dense_force(j, step, fm, Q, Qv)
+    return elastic_dense_force(j, step, fm, Q, Qv)
+
+
+@njit(**JIT_INTERNAL)
 def dense_force(j, step, fm, Q, Qv):
     """The force of contact j by the chain's law (``forces.law_force``: its static overlap included, and
     its rate of compression for a viscoelastic law) from the dense output of ``step``
@@ -61,6 +83,24 @@ def dense_force(j, step, fm, Q, Qv):
 
 
 @njit(**JIT_INTERNAL)
+def elastic_acceleration(kind, theta, k, step, fm, Q, Qv):
+    """:func:`dense_acceleration` of the paper's chain (elastic, unloaded; Eq. motion_rescaled): what the
+    paper's step loop follows to its granules' velocity maxima, and the general search on such a chain."""
+    x, v, Kx, Kv, h = step
+    c, inv_m, p = fm.stiffness, fm.inv_mass, fm.params
+    M = x.shape[0]
+    dense_weights(kind, theta, Q, Qv)
+    xk = dense_value(x[k], Kx, k, h, Q)
+    left = 0.0
+    right = 0.0
+    if k > 0:
+        left = contact_force(dense_value(x[k - 1], Kx, k - 1, h, Q) - xk, c[k - 1], p)
+    if k < M - 1:
+        right = contact_force(xk - dense_value(x[k + 1], Kx, k + 1, h, Q), c[k], p)
+    return (left - right) * inv_m[k]
+
+
+@njit(**JIT_INTERNAL)
 def dense_acceleration(kind, theta, k, step, fm, Q, Qv):
     """Acceleration of granule k at t + theta h from the dense output of ``step`` (``records.Dense``),
     forces from ``fm`` (``records.Forces``; the dynamic forces of ``forces.accelerations``: each
@@ -68,19 +108,14 @@ def dense_acceleration(kind, theta, k, step, fm, Q, Qv):
     x, v, Kx, Kv, h = step
     c, inv_m, p, o, f0, _, _ = fm
     M = x.shape[0]
+    if p.gamma == 0.0 and p.static_force == 0.0 and p.yield_overlap == 0.0:
+        # Elastic and unloaded at run time (the general loop's chain with a striker, say): the paper's arithmetic,
+        # without the general path's extra call and loads per evaluation (tens per peak).
+        return elastic_acceleration(kind, theta, k, step, fm, Q, Qv)
     dense_weights(kind, theta, Q, Qv)
     xk = dense_value(x[k], Kx, k, h, Q)
     left = 0.0
     right = 0.0
-    if p.gamma == 0.0 and p.static_force == 0.0 and p.yield_overlap == 0.0:
-        # The paper's chain, as before real contacts: the root searches of the peaks call this tens of
-        # times per peak, and the general path's extra call and loads cost the ensembles of short
-        # chains a few per cent (same-run timings against granchain 0.4.0).
-        if k > 0:
-            left = contact_force(dense_value(x[k - 1], Kx, k - 1, h, Q) - xk, c[k - 1], p)
-        if k < M - 1:
-            right = contact_force(xk - dense_value(x[k + 1], Kx, k + 1, h, Q), c[k], p)
-        return (left - right) * inv_m[k]
     vk = dense_value(v[k], Kv, k, h, Qv) if p.gamma > 0.0 else 0.0  # rates only for a viscoelastic law
     if k > 0:
         w = dense_value(v[k - 1], Kv, k - 1, h, Qv) - vk if p.gamma > 0.0 else 0.0
@@ -125,7 +160,7 @@ def _root_search(what):
     slower (every peak is located by this loop; same-process timings at N = 26)."""
 
     @njit(**JIT_INTERNAL)
-    @named(("acceleration", "approach", "force_rate")[what])
+    @named(("acceleration", "approach", "force_rate", "elastic_acceleration")[what])
     def search(kind, i, f01, step, fm, Q, Qv):
         lo, hi = 0.0, 1.0
         f_lo, f_hi = f01
@@ -140,6 +175,8 @@ def _root_search(what):
                 theta = 0.5 * (lo + hi)
             if what == ROOT_ACCELERATION:
                 f = dense_acceleration(kind, theta, i, step, fm, Q, Qv)
+            elif what == ROOT_ELASTIC_ACCELERATION:
+                f = elastic_acceleration(kind, theta, i, step, fm, Q, Qv)
             elif what == ROOT_APPROACH:
                 f = relative_velocity(kind, theta, i, step, Q, Qv)
             else:
@@ -164,13 +201,15 @@ def _root_search(what):
 _acceleration_root = _root_search(ROOT_ACCELERATION)
 _approach_root = _root_search(ROOT_APPROACH)
 _force_rate_root = _root_search(ROOT_FORCE_RATE)
+_elastic_acceleration_root = _root_search(ROOT_ELASTIC_ACCELERATION)
 
 
 @njit(**JIT_INLINE)
 def first_root(kind, what, i, f01, step, fm, Q, Qv):
     """First theta in [0, 1] where the followed function (f01 = its values (+ at 0, <= 0 at 1)) stops
-    being positive: a granule's velocity maximum (``ROOT_ACCELERATION``), a contact's compression
-    maximum (``ROOT_APPROACH``) or its force maximum (``ROOT_FORCE_RATE``).
+    being positive: a granule's velocity maximum (``ROOT_ACCELERATION``; ``ROOT_ELASTIC_ACCELERATION`` on the
+    paper's chain), a contact's compression maximum (``ROOT_APPROACH``) or its force maximum
+    (``ROOT_FORCE_RATE``).
 
     Illinois (modified regula falsi) while the bracket has a strictly negative end; bisection
     while it ends on an exact zero (a contact that opened: the acceleration is then zero on a
@@ -185,6 +224,8 @@ def first_root(kind, what, i, f01, step, fm, Q, Qv):
     kind = np.int64(kind)
     if what == ROOT_ACCELERATION:
         return _acceleration_root(kind, i, f01, step, fm, Q, Qv)
+    if what == ROOT_ELASTIC_ACCELERATION:
+        return _elastic_acceleration_root(kind, i, f01, step, fm, Q, Qv)
     if what == ROOT_APPROACH:
         return _approach_root(kind, i, f01, step, fm, Q, Qv)
     return _force_rate_root(kind, i, f01, step, fm, Q, Qv)

@@ -74,12 +74,12 @@ State = namedtuple("State", ["x", "v", "history"])
 #: forces of ``Run.contacts`` on the grid ``grid_c`` (T, S; NaN behind a trailing window).
 Outputs = namedtuple("Outputs", ["peak_v", "peak_t", "grid_v", "peak_f", "peak_ft", "grid_f", "info", "grid_c"])
 
-#: What the ensemble kernel records per realisation r (rows): peak velocity and time (R, K), the
-#: recorded contacts' peak force and time (R, C), the wall's peak force and its time (R,; the schema's
-#: ``peak_wall_force``, ``peak_wall_force_time``), the status, the relative energy error, the accepted
-#: steps, the end time and the dissipated energy (R,).
-Rows = namedtuple("Rows", ["peak_v", "peak_t", "peak_f", "peak_ft", "peak_wall_force", "peak_wall_force_time", "status",
-                           "energy_error", "n_steps", "t_end", "dissipated"])
+#: What the ensemble kernel records per realisation r (rows), each field named as the results' schema names
+#: it (so that a backend fills it from the schema-built buffers by name): peak velocity and time (R, K), the
+#: recorded contacts' peak force and time (R, C), the wall's peak force and its time (R,), the status, the
+#: relative energy error, the accepted steps, the end time and the dissipated energy (R,).
+Rows = namedtuple("Rows", ["peak_velocity", "peak_time", "peak_force", "peak_force_time", "peak_wall_force",
+                           "peak_wall_force_time", "status", "energy_error", "n_steps", "t_end", "dissipated_energy"])
 
 #: The ensemble kernel's fixed-point sums (int64): of the grid velocities and their squares (T, K), of
 #: the wall force (T,), the count of successful realisations (1,), and of the aligned pulse (L, K).

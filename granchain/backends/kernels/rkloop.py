@@ -23,6 +23,7 @@ from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW
 from .dense import (
     ROOT_ACCELERATION,
     ROOT_APPROACH,
+    ROOT_ELASTIC_ACCELERATION,
     ROOT_FORCE_RATE,
     dense_compression,
     dense_force,
@@ -30,6 +31,7 @@ from .dense import (
     falls,
     first_root,
     hermite_max_estimate,
+    law_dense_force,
 )
 from .forces import (
     accelerations_once,
@@ -216,11 +218,12 @@ def yield_turn(kind, step, VE, hw, fm, Q, QV):
     return turn
 
 
-def velocity_peaks(kind, dense_ready, step, XS, VS, hp, fm, Q, QV, obs, q_lo, q_hi, lo, t, peak_v, peak_t, peak_rtol,
-                   front):
+def velocity_peaks(kind, what, dense_ready, step, XS, VS, hp, fm, Q, QV, obs, q_lo, q_hi, lo, t, peak_v, peak_t,
+                   peak_rtol, front):
     """Velocity maxima of the observed granules obs[q_lo..q_hi-1] in the step ``step`` (``records.Dense``,
     from t; the granules from ``lo`` on), where an acceleration goes from + to -: each root located on the
-    dense output and recorded if it is a new peak (``peaks.is_new_peak``). Returns (front, dense_ready):
+    dense output (``what``: the acceleration followed, ``dense.ROOT_ACCELERATION`` or, on the paper's chain,
+    ``ROOT_ELASTIC_ACCELERATION``) and recorded if it is a new peak (``peaks.is_new_peak``). Returns (front, dense_ready):
     the most advanced observed granule whose maximum has been located, and whether the dense output is laid
     out. A vectorised count over every granule of the window (zeros past it) comes first; the loop over the
     observed granules runs only when it finds one (1.6 % of the steps of an N = 26 decorated chain)."""
@@ -236,7 +239,7 @@ def velocity_peaks(kind, dense_ready, step, XS, VS, hp, fm, Q, QV, obs, q_lo, q_
             if not dense_ready:
                 SCHEME.dense_data(X, V, XS, VS, Kx, Kv, h, hp)
                 dense_ready = True
-            theta = first_root(kind, ROOT_ACCELERATION, k, (a0, a1), step, fm, Q, QV)
+            theta = first_root(kind, what, k, (a0, a1), step, fm, Q, QV)
             SCHEME.weights(theta, Q, QV)
             vpk = dense_value(V[k], Kv, k, h, QV)
             if is_new_peak(vpk, peak_v[q], peak_rtol):
@@ -301,11 +304,12 @@ def force_peaks(kind, dense_ready, damped, plastic, step, XS, VS, VE, hw, hp, fm
     return dense_ready
 
 
-def sample_grid(dense_ready, g, step, XS, VS, hp, fm, Q, QV, lo, hi, M, t, run, out, v, f0):
+def sample_grid(general, dense_ready, g, step, XS, VS, hp, fm, Q, QV, lo, hi, M, t, run, out, v, f0):
     """The grid samples run.t_grid[g..] that fall in the step ``step`` (``records.Dense``, from t; the
     granules lo..hi-1 integrated, of M): each observed granule's velocity into ``out.grid_v`` (the velocity
     it left the window with behind it; 0 past its averaged-pulse window, ``run.pulse_end``), the wall's
-    total force into ``out.grid_f`` and each sensed contact's into ``out.grid_c``. Returns the next g."""
+    total force into ``out.grid_f`` and each sensed contact's into ``out.grid_c`` (by the chain's law;
+    ``general`` False: the paper's). Returns the next g."""
     X, V, Kx, Kv, h = step
     p = fm.params
     obs, t_grid, pulse_end, sensed = run.observed, run.t_grid, run.pulse_end, run.contacts
@@ -326,10 +330,10 @@ def sample_grid(dense_ready, g, step, XS, VS, hp, fm, Q, QV, lo, hi, M, t, run, 
             else:
                 out.grid_v[g, q] = dense_value(V[k], Kv, k, h, QV) if k < hw else 0.0
         if p.wall:  # the total force on the wall (the static load included; only that until the pulse is near)
-            out.grid_f[g] = dense_force(M - 2 - lo, step, fm, Q, QV) if M - 2 < hi else f0[M - 2]
+            out.grid_f[g] = law_dense_force(general, M - 2 - lo, step, fm, Q, QV) if M - 2 < hi else f0[M - 2]
         for s in range(n_sensed):  # granules past the window are at rest: the force is exact there too
             j = sensed[s] - lo
-            out.grid_c[g, s] = dense_force(j, step, fm, Q, QV) if j >= 0 else math.nan
+            out.grid_c[g, s] = law_dense_force(general, j, step, fm, Q, QV) if j >= 0 else math.nan
         g += 1
     return g
 
@@ -403,6 +407,8 @@ def rk_kernel(scheme, general):
     velocity_forces = scheme.velocity_forces
     evaluations = scheme.evaluations
     exponent = pi_exponent(scheme)
+    # The acceleration the velocity peaks follow: the paper's chain compiles the elastic law's search alone.
+    acceleration = ROOT_ACCELERATION if general else ROOT_ELASTIC_ACCELERATION
 
     def kernel(record, model, run, state, out):
         """Integrate one chain (``model``, ``records.Model``) from ``state`` (x, v at t = 0; receives the
@@ -569,12 +575,12 @@ def rk_kernel(scheme, general):
                         h *= turn
                         continue
                 # Accepted: peaks and grid samples from the dense output over [t, t + h].
-                front, dense_ready = velocity_peaks(kind, not lazy_dense, step, XS, VS, hp, FM, Q, QV, obs, q_lo, q_hi, lo,
-                                                    t, peak_v, peak_t, peak_rtol, front)
+                front, dense_ready = velocity_peaks(kind, acceleration, not lazy_dense, step, XS, VS, hp, FM, Q, QV, obs, q_lo,
+                                                    q_hi, lo, t, peak_v, peak_t, peak_rtol, front)
                 dense_ready = force_peaks(kind, dense_ready, damped, plastic, step, XS, VS, VE, hw, hp, FM, Q, QV, lo, t,
                                           peak_f, peak_ft, peak_d, peak_rtol)
                 if g < n_grid and t_grid[g] <= t + h:
-                    g = sample_grid(dense_ready, g, step, XS, VS, hp, FM, Q, QV, lo, hi, M, t, run, out, v, f0p)
+                    g = sample_grid(general, dense_ready, g, step, XS, VS, hp, FM, Q, QV, lo, hi, M, t, run, out, v, f0p)
                 for i in range(hp):
                     X[i] = XS[i]
                     V[i] = VS[i]
@@ -617,15 +623,13 @@ def rk_kernel(scheme, general):
                     if relax_lag > 0 and front >= relax_lag:
                         relaxed = max(0, obs[front - relax_lag] - lo)
 
-                if cut:  # XM, VM, MM still start at the old window start
-                    status, exit_since = end_of_step(x[lo:M], v[lo:M], m[lo:], p.wall, hi - lo, t, run, exit_since, t_needed)
-                elif plastic:  # a yielded last contact opens at its plastic overlap (the dent it keeps)
-                    gap = 0.0
-                    if hist[M - 2] > dy[M - 2]:
-                        gap = unloading_curve(hist[M - 2], dy[M - 2])[1] - op[M - 2]
-                    status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed, gap)
-                else:
-                    status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed)
+                # The stop rule, called once (each inlined copy is compiled again), on the chain from the window start.
+                if cut:  # (the inner loop ends after this step: its views are taken again from the new start)
+                    XM, VM, MM = x[lo:M], v[lo:M], m[lo:]
+                gap = 0.0
+                if plastic and hist[M - 2] > dy[M - 2]:  # a yielded last contact opens at its plastic overlap (its dent)
+                    gap = unloading_curve(hist[M - 2], dy[M - 2])[1] - op[M - 2]
+                status, exit_since = end_of_step(XM, VM, MM, p.wall, hi - lo, t, run, exit_since, t_needed, gap)
                 if status >= 0:
                     break
 
