@@ -32,6 +32,9 @@ Workloads, all through the public API that both sides share:
 Timing under noise: the two sides take turns workload by workload, round after round, the side
 that goes first swapping every round (A B, B A, A B, ...), so a slow spell or a warm cache favours
 neither; each side keeps its best (for workload 1 the best of the rounds per realisation, summed).
+Every round runs in fresh worker processes (loading the kernels from their side's cache, untimed):
+the same code timed in separate processes differed by 10-20 % on a shared 2-core machine, more than
+between rounds of one process, so a side's best is over as many processes as rounds.
 The ratio printed is current speed / baseline speed (> 1: the current tree is faster), PASS at
 >= 0.97. The results of every workload are compared between the sides (peak velocities and times,
 grid velocities, step counts, every variable of the ensembles' Datasets): ``bitwise equal`` or the
@@ -213,7 +216,8 @@ class Side:
     def __init__(self, name: str, tree: Path, scratch: Path):
         self.name, self.tree = name, tree
         self.env = dict(os.environ, PYTHONPATH=str(tree), NUMBA_CACHE_DIR=str(scratch / f"numba-cache-{name}"))
-        self.log = open(scratch / f"worker-{name}.log", "w")  # noqa: SIM115 (the worker outlives any block; close() closes it)
+        self.scratch = scratch
+        self.log = open(scratch / f"worker-{name}.log", "a")  # noqa: SIM115 (the worker outlives any block; close() closes it)
         self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--worker"], cwd=tree, env=self.env,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log, text=True)
 
@@ -338,8 +342,8 @@ def main(argv=None) -> int:
     print(f"bench_baseline: current = {current} vs baseline = {rev}" + (f" ({args.baseline})" if args.baseline != rev else "")
           + f" (a git worktree), {now}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; {load()} (before)")
-    print(f"timing: {args.rounds} rounds, the sides alternating workload by workload (the first side swapping every round), "
-          f"best per side; speed ratio = current/baseline (> 1: current faster), PASS at >= {TARGET}", flush=True)
+    print(f"timing: {args.rounds} rounds, each in fresh processes, the sides alternating workload by workload (the first side "
+          f"swapping every round), best per side; speed ratio = current/baseline (> 1: current faster), PASS at >= {TARGET}", flush=True)
 
     scratch = Path(tempfile.mkdtemp(prefix="granchain-bench-baseline-"))
     worktrees, sides = [], {}
@@ -408,6 +412,14 @@ def measure(args, sides, scratch, n26, n101) -> str:
 
     for rnd in range(args.rounds):
         print(f"round {rnd + 1}/{args.rounds}: first {order[0]}, {load()}", file=sys.stderr, flush=True)
+        if rnd > 0:  # fresh processes, their kernels loaded from the cache before any timing
+            for name in order:
+                old = sides[name]
+                old.close()
+                sides[name] = Side(name, old.tree, old.scratch)
+                sides[name].send(op="warmup")
+            for name in order:
+                sides[name].receive()
         for case in sim_cases:
             n, name, count = case
             for side in order:

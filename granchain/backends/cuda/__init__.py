@@ -261,6 +261,7 @@ KERNEL_OUTPUTS = ("peak_velocity", "peak_time", "peak_force", "peak_force_time",
                   "wall_force", "status", "n_steps", "n_rejected", "t_end", "exit_time", "window_start",
                   "frozen_potential", "positions", "velocities")
 
+
 def _longest_first(masses, stiffness) -> np.ndarray:
     """The rows in decreasing order of their fastest contact oscillation, max_j sqrt(c_j / min(m_j, m_j+1)):
     an adaptive step follows the lightest granule squeezed by its stiffest contact, so this orders the rows
