@@ -215,7 +215,7 @@ class Backend:
         ``peak_velocity``, ``peak_time``, ``peak_force``, ``peak_force_time``, ``status``, ``energy_error``,
         ``n_steps``, ``t_end``, and ``peak_wall_force``, ``peak_wall_force_time``, ``dissipated_energy``
         where the chains have them; the fixed-point sums ``sum_v``, ``sum_v2``, ``sum_wall``, ``n_valid``,
-        and ``lags``, ``sum_a``, ``sum_a2`` for the aligned pulse: ``granchain.ensembles.run.chunk_buffers``
+        and ``lags``, ``sum_a``, ``sum_a2`` for the aligned pulse: ``granchain.ensembles.chunks.chunk_buffers``
         builds them from the schema). ``model``: what the rows share besides their arrays (a
         :class:`granchain.ChainModel`; None: the paper's chain). The batch seam of the ensembles and the design evaluator; a
         backend implements :meth:`integrate_batch`, which this calls with the batch's arrays (C-contiguous

@@ -110,7 +110,7 @@ def keep_until(ends: np.ndarray) -> np.ndarray:
 def window_ends(spec, compute_rows) -> dict:
     """{chain kind: window ends (K,)} for the kinds of ``spec`` that get a window (:func:`applies`), from
     the pilot: realisations 0..PILOT_REALIZATIONS-1 of each such kind, integrated by ``compute_rows(pilot
-    spec)`` (which returns the chunk's results: ``ensembles.run._compute_chunk``) on a one-point grid
+    spec)`` (which returns the chunk's results: ``ensembles.chunks._compute_chunk``) on a one-point grid
     (peaks only: the pilot itself costs linearly in N). Raises if too few pilot realisations succeed
     to estimate a spread."""
     from .._status import SUCCESS

@@ -11,8 +11,10 @@
   chains shares (law, static load, striker, wall), as one value;
 - :mod:`~granchain.model.collision`: the two-body collision of the viscoelastic law (its coefficient
   of restitution, and the damping that gives one);
+- :mod:`~granchain.model.spheres`: spheres' masses and contact prefactors (paper Sec. II, Eq. r-prime), against
+  a wall and between materials, and the ranges double precision integrates;
 - :mod:`~granchain.model.chain`: :class:`~granchain.Chain` (masses, stiffnesses, exponent, the values
-  above) and its builders from radii (paper Sec. II, Eq. r-prime);
+  above) and its builders from radii;
 - :mod:`~granchain.model.effective`: the decorated chain's effective chain (paper Sec. III A);
 - :mod:`~granchain.model.distributions`: small-radius distributions;
 - :mod:`~granchain.model.random`: random decorated chains drawn from (seed, realisation).

@@ -12,7 +12,7 @@ whose peak velocity and peak time are recorded.
 A fixed wall at the far end is the same representation: a last granule of
 infinite radius and mass (``masses[-1] = inf``, inverse mass 0) whose contact
 stiffness is the limit of Eq. (r-prime) for R_{M} -> infinity, sqrt(2 R_{M-1})
-(:func:`wall_stiffness`). Build one with ``wall=True`` on the builders or
+(:func:`~granchain.model.spheres.wall_stiffness`). Build one with ``wall=True`` on the builders or
 :meth:`Chain.with_wall`; the free end stays the default (the paper's case).
 
 Real contacts are values of the chain too (``granchain.model.contacts``): a
@@ -26,7 +26,7 @@ Units are the paper's rescaled ones (Sec. II): radii in units of the radius of
 the reference (first, large) granule, masses m = R^3 in units of its mass, time
 and displacement as in Eq. (motion_rescaled). With several materials the
 reference is granule 1's material: m_k = (rho_k / rho_1) R_k^3 and the contact
-prefactors carry E*_k,k+1 / E*_1,1 (:func:`material_stiffness`).
+prefactors carry E*_k,k+1 / E*_1,1 (:func:`~granchain.model.spheres.material_stiffness`).
 """
 
 from __future__ import annotations
@@ -39,6 +39,9 @@ from .._validate import count, exponent, finite_scalar, positive_array
 from .chainmodel import ChainModel
 from .contacts import (MIN_DYNAMIC_RATIO, ContactLaw, FixedWall, FreeEnd, Impulse, LoadedEnd, PowerLaw, Precompression, Striker,
                        Viscoelastic, checked_law, ends_at_exit, far_end)
+from .spheres import (MASS_RANGE, RADIUS_RANGE, RIGID, STIFFNESS_RANGE, VELOCITY_RANGE, _check_radii,  # noqa: F401 (kept importable from here)
+                      _in_range, _material, material_stiffness, material_wall_stiffness, sphere_mass, sphere_stiffness,
+                      wall_stiffness)
 
 __all__ = [
     "Chain",
@@ -285,7 +288,7 @@ class Chain:
         has mass 1) and its ``velocity`` (default: this chain's ``initial_velocity``). The striker is a
         sphere of granule 1's material, or of ``material`` (a :class:`granchain.units.Material`) for a
         chain built with ``materials=``: its contact with granule 1 is Hertz's for the pair (Eq. r-prime;
-        :func:`material_stiffness` for two materials); of a ``mass`` alone, the radius is that of a
+        :func:`~granchain.model.spheres.material_stiffness` for two materials); of a ``mass`` alone, the radius is that of a
         sphere of that mass. It sits in front of granule 1, just touching it (carrying the static load
         of a precompressed chain), and is launched at t = 0. Granule labels keep their meaning
         (granule 1 is the first after the striker), and the striker is not observed unless asked
@@ -336,10 +339,10 @@ class Chain:
         """The same chain ending in a wall: one more granule, of infinite mass (it does not move).
 
         The wall contact's stiffness is ``stiffness`` or, for a chain built from radii,
-        sqrt(2 R_M) (:func:`wall_stiffness`, the limit of Eq. r-prime: a flat wall of the last
+        sqrt(2 R_M) (:func:`~granchain.model.spheres.wall_stiffness`, the limit of Eq. r-prime: a flat wall of the last
         granule's material). ``material`` (a :class:`granchain.units.Material`, or ``"rigid"`` for an
         infinitely stiff wall) makes it an elastic wall of its own material: Hertz's effective
-        modulus of the pair and the sphere's radius (:func:`material_wall_stiffness`), relative to the
+        modulus of the pair and the sphere's radius (:func:`~granchain.model.spheres.material_wall_stiffness`), relative to the
         granules' material: that of a chain built with ``materials=``, else ``granules`` (the one
         material of the chain's granules, the material of its physical units). A chain without radii
         (e.g. an effective chain) needs ``stiffness``.
@@ -430,26 +433,6 @@ class Chain:
         )
 
 
-#: The range of rescaled masses a chain takes (units of the reference granule's mass): a granule 1e-18
-#: times lighter (radius 1e-6) than the reference has contact times and compressions ~1e-6 of the
-#: others', which no step budget reaches and which sink toward the rounding of the positions.
-MASS_RANGE = (1e-18, 1e18)
-#: The range of radii (units of the reference radius): the cube roots of :data:`MASS_RANGE`.
-RADIUS_RANGE = (1e-6, 1e6)
-#: The range of contact prefactors (units of the reference pair's, sqrt(2 R R' / (R + R'))).
-STIFFNESS_RANGE = (1e-12, 1e12)
-#: The range of the struck granule's initial speed (units of the impact speed of the rescaling).
-VELOCITY_RANGE = (1e-8, 1e8)
-
-
-def _in_range(name: str, a: np.ndarray, bounds: tuple, what: str, why: str = "") -> None:
-    lo, hi = bounds
-    bad = (a < lo) | (a > hi)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"{name}[{i}] = {float(a[i]):g} is outside {lo:g}..{hi:g} ({what}){why or ': double precision cannot integrate granules and contacts that far from the reference one (rescaled units, paper Sec. II)'}")
-
-
 def _largest_static_force(m: float, c: float, n: float, v: float) -> float:
     """The F0 at which :meth:`Precompression.resolvable` equals MIN_DYNAMIC_RATIO: D / delta0 =
     v sqrt(m / ((n-1) c)) delta0^(-n/2), solved for delta0 and F0 = c delta0^(n-1)."""
@@ -511,104 +494,6 @@ def _check_yielding(dy, stiffness, load) -> None:
                              "yield speed, so that the chain starts elastic")
 
 
-def _check_radii(r: np.ndarray, name: str = "radii") -> None:
-    """Radii within :data:`RADIUS_RANGE` (units of the reference radius), checked before the masses R^3
-    they give, so that the message names the radius."""
-    lo, hi = RADIUS_RANGE
-    bad = (r < lo) | (r > hi)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        which = "small" if r[i] < lo else "large"
-        raise ValueError(f"{name}[{i}] = {float(r[i]):g} is too {which}: radii must lie in {lo:g}..{hi:g} (units of the "
-                         f"reference radius), because a sphere of radius R has mass R^3 and a mass ratio beyond "
-                         f"{MASS_RANGE[1]:g} gives contact times and compressions that double precision and any step "
-                         "budget cannot integrate beside the reference granule")
-
-
-def wall_stiffness(radius) -> np.ndarray:
-    """Contact prefactor of a sphere of radius R against a fixed wall: sqrt(2 R).
-
-    The limit of Eq. (r-prime), sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})), for R_{k+1} -> infinity
-    (a flat wall of the same material). Works on arrays (a batch of last radii).
-    """
-    return np.sqrt(2.0 * np.asarray(radius, dtype=float))  # Eq. (r-prime), R_{k+1} -> inf
-
-
-RIGID = "rigid"
-
-
-def _material(m, *, rigid: bool = False):
-    """The one lookup of a material: a :class:`granchain.units.Material` as it is, a preset name through
-    ``granchain.units.get_material`` (case-insensitive), and, where a wall's material is meant
-    (``rigid=True``), ``"rigid"`` in any case (an infinitely stiff wall: :data:`RIGID`)."""
-    from ..units import Material, get_material
-
-    if isinstance(m, Material):
-        return m
-    if isinstance(m, str):
-        if m.strip().lower() == RIGID:
-            if rigid:
-                return RIGID
-            raise ValueError(f"{m!r} is a wall's material only (an infinitely stiff wall): a granule or striker needs a "
-                             "granchain.units.Material or a preset name (steel, stainless-steel, brass, aluminium, glass, ptfe)")
-        return get_material(m)
-    raise ValueError(f"a material must be a granchain.units.Material or a preset name (steel, stainless-steel, brass, "
-                     f"aluminium, glass, ptfe{', or rigid for a wall' if rigid else ''}), got {m!r}")
-
-
-def _pair_modulus(a, b) -> float:
-    """Hertz's effective modulus of two spheres (or a sphere and a flat) of materials a and b:
-    1/E* = (1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b (K. L. Johnson, *Contact Mechanics*, Sec. 4.2); b may be
-    ``"rigid"`` (E_b infinite)."""
-    if isinstance(b, str) and b == RIGID:
-        return a.E / (1.0 - a.nu**2)
-    return 1.0 / ((1.0 - a.nu**2) / a.E + (1.0 - b.nu**2) / b.E)
-
-
-def material_stiffness(radii, materials, *, reference=None) -> np.ndarray:
-    """Contact prefactors of neighbouring spheres of several materials, in the rescaled units of
-    ``reference`` (default: the first granule's material):
-
-        c_k = (E*_k,k+1 / E*_ref) sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})),
-
-    Hertz's force (4/3) E* R_eff^(1/2) delta^(3/2) with the pair's effective modulus E* and radius
-    R_eff (K. L. Johnson, *Contact Mechanics*, Sec. 4.2) divided by the reference pair's, so that
-    one material gives Eq. (r-prime) bit for bit (the ratio is then exactly 1)."""
-    r = np.asarray(radii, dtype=float)
-    mats = [_material(m) for m in materials]
-    ref = mats[0] if reference is None else _material(reference)
-    e_ref = _pair_modulus(ref, ref)
-    ratio = np.array([1.0 if (a == ref and b == ref) else _pair_modulus(a, b) / e_ref for a, b in zip(mats[:-1], mats[1:])])
-    return ratio * sphere_stiffness(r)
-
-
-def material_wall_stiffness(radius, material, wall_material, *, reference) -> float:
-    """Contact prefactor of a sphere of ``radius`` and ``material`` against a flat wall of
-    ``wall_material`` (a Material, or ``"rigid"``): (E*_sphere,wall / E*_ref) sqrt(2 R), the
-    limit R_wall -> infinity of :func:`material_stiffness` (:func:`wall_stiffness` when all are
-    one material)."""
-    a, ref = _material(material), _material(reference)
-    b = _material(wall_material, rigid=True)
-    ratio = 1.0 if (a == ref and b == ref) else _pair_modulus(a, b) / _pair_modulus(ref, ref)
-    return float(ratio * wall_stiffness(radius))
-
-
-def sphere_mass(radii: np.ndarray) -> np.ndarray:
-    """m = R^3 (equal density, paper Sec. II), written as a product so that arrays of any
-    shape (one chain or a batch of chains) give bitwise the same masses."""
-    r = np.asarray(radii, dtype=float)
-    return r * r * r
-
-
-def sphere_stiffness(radii: np.ndarray) -> np.ndarray:
-    """Contact prefactor of neighbouring spheres, r_k = sqrt(2 R_k R_{k+1} / (R_k + R_{k+1})).
-
-    Paper Eq. (r-prime); radii in units of the reference radius, along the last axis.
-    """
-    r = np.asarray(radii, dtype=float)
-    return np.sqrt(2.0 * r[..., :-1] * r[..., 1:] / (r[..., :-1] + r[..., 1:]))  # Eq. (r-prime)
-
-
 def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observed=None, kind: str = "radii",
                wall: bool = False, materials=None, wall_material=None) -> Chain:
     """A chain of spheres from any list of radii.
@@ -616,7 +501,7 @@ def from_radii(radii, *, n: float = HERTZ, initial_velocity: float = 1.0, observ
     One material (the default): m_k = R_k^3 (paper Sec. II: M_k = M_1 m_k with equal density),
     stiffness from Eq. (r-prime). ``materials``: one :class:`granchain.units.Material` (or preset
     name) per granule, e.g. a steel-PTFE dimer chain: m_k = (rho_k / rho_1) R_k^3 and the stiffness
-    of each pair from Hertz's effective modulus and radius (:func:`material_stiffness`), in the
+    of each pair from Hertz's effective modulus and radius (:func:`~granchain.model.spheres.material_stiffness`), in the
     rescaled units of granule 1's material (``granchain.units.scale`` of that material). All granules
     are observed unless ``observed`` says otherwise. ``wall=True`` ends the chain in a wall
     (:meth:`Chain.with_wall`): of the last granule's material, or of ``wall_material`` (a Material
