@@ -191,7 +191,7 @@ def model_from_args(args, units, n: float):
     if radius is not None:
         if not radius > 0:
             raise ValueError(f"--striker-radius must be > 0, got {rtext!r}")
-        from ..model.chain import _check_radii
+        from ..model.spheres import _check_radii
 
         _checked("--striker-radius", rtext, lambda: _check_radii(__import__("numpy").array([radius]), "striker radius"))
         mass = radius**3  # a sphere of the chain's material (rescaled mass R^3)

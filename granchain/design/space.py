@@ -342,7 +342,7 @@ class BinarySpace(DesignSpace):
     ``materials[0]``) or b; parameters s2..sM in {0, 1} say which (granule 1, the struck one, is
     species a: the unit of the rescaled variables). With ``materials`` (two
     :class:`granchain.units.Material` or preset names) masses are (rho / rho_a) R^3 and contacts
-    Hertz's for the pair (:func:`granchain.model.chain.material_stiffness`), relative to species a."""
+    Hertz's for the pair (:func:`granchain.model.spheres.material_stiffness`), relative to species a."""
 
     size: int = 20
     species_radii: tuple = (1.0, 0.5)
@@ -358,7 +358,7 @@ class BinarySpace(DesignSpace):
         if ra != 1.0:
             raise ValueError(f"species a is granule 1's (the struck granule, radius 1 in rescaled units): give radii = (1, R_b), got R_a = {ra:g}")
         if materials is not None:
-            from ..model.chain import _material
+            from ..model.spheres import _material
 
             materials = tuple(_material(m) for m in materials)
             if len(materials) != 2:

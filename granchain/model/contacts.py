@@ -418,7 +418,7 @@ class ElasticPlastic(ContactLaw):
 
             delta_y,k = delta_y,ref (2 R*_k)^2 / c_k^2 (p_k / p_ref)^2,
 
-        since c_k = (E*_k / E*_ref) sqrt(2 R*_k) (``granchain.model.chain.material_stiffness``) and the pair's
+        since c_k = (E*_k / E*_ref) sqrt(2 R*_k) (``granchain.model.spheres.material_stiffness``) and the pair's
         limiting pressure p_k is the softer material's (it yields first), 1.60 times its yield stress
         (``Material.limiting_pressure``); a rigid wall does not yield. Every material then needs a
         ``yield_stress``."""
