@@ -136,11 +136,13 @@ def test_kernels_agree_with_the_reference_on_a_chain_with_a_wall():
     assert res.peak_wall_force < 0.5 * elastic.peak_wall_force
 
 
-@pytest.mark.parametrize("integrator", [gc.DP5(rtol=1e-11, atol=1e-13), gc.DOP853(rtol=1e-11, atol=1e-13)],
+@pytest.mark.parametrize("integrator", [gc.DP5(rtol=1e-11, atol=1e-13), gc.DOP853(rtol=1e-12, atol=1e-14)],
                          ids=["dp5", "dop853"])
 def test_energy_balance_with_plastic_work(integrator):
     """kinetic + elastic (the unloading curves through each contact's state) + plastic work = initial within
-    1e-8 (measured 2e-10 for DP5, 2.5e-9 for DOP853); most of the energy goes into plastic work here."""
+    1e-8 (measured 2e-10 for DP5, 2.3e-10 for DOP853); most of the energy goes into plastic work here.
+    DOP853 runs at rtol 1e-12: it restarts at every branch switch, and at 1e-11 its global error (about
+    steps x rtol, 1,197 steps) read 2.5e-9 on one processor and 1.4e-8 on another, at the bound."""
     chain = wall_chain()
     res = gc.simulate(chain, integrator)
     assert res.ok, res.message
