@@ -98,15 +98,21 @@ def main() -> None:
 
 
 def processor() -> str:
-    """The host processor's model name (Linux), else the platform's word for it."""
+    """What Numba compiles for: LLVM's name of the host processor and a digest of its features (two machines
+    that share a marketing name, "Intel(R) Xeon(R) Processor", may differ in vector width), with the
+    marketing name (Linux) for a reader."""
+    import hashlib
+
+    import llvmlite.binding as llvm
+
+    features = llvm.get_host_cpu_features().flatten()
+    model = platform.processor() or platform.machine()
     try:
         text = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
-        for line in text.splitlines():
-            if line.startswith("Model name:"):
-                return line.split(":", 1)[1].strip()
+        model = next((line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("Model name:")), model)
     except OSError:
         pass
-    return platform.processor() or platform.machine()
+    return f"{llvm.get_host_cpu_name()} (LLVM features {hashlib.sha256(features.encode()).hexdigest()[:12]}; {model})"
 
 
 if __name__ == "__main__":
