@@ -21,6 +21,7 @@ from .store import Variable
 #: Seconds of work per progress update within a chunk (local runs with a progress report).
 PROGRESS_SECONDS = 2.0
 
+
 def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_progress=None) -> dict:
     """Results of chunk j: the family's random parameters, per-realisation results and fixed-point sums.
 

@@ -31,7 +31,7 @@ import granchain as gc
 SIMULATE_FIELDS = ("peak_velocity", "peak_time", "velocity", "peak_force", "n_steps", "energy_error", "t_end")
 
 
-def chains(gc):
+def chains():
     base = gc.random_decorated(6, gc.Uniform(0.01, 0.4), seed=3)
     return {
         "precompressed": base.with_precompression(0.05),
@@ -43,7 +43,7 @@ def chains(gc):
     }
 
 
-def integrators(gc, chain_name):
+def integrators(chain_name):
     """Explicit tolerances (defaults may move; the fixture pins the numbers of these integrators)."""
     out = {"DP5(1e-8, 1e-11)": gc.DP5(rtol=1e-8, atol=1e-11)}
     if chain_name not in ("viscoelastic", "everything"):  # RKN4 needs forces of positions only
@@ -51,7 +51,7 @@ def integrators(gc, chain_name):
     return out
 
 
-def families(gc):
+def families():
     dist = gc.Uniform(0.01, 0.4)
     return {
         "decorated-precompressed": gc.RandomDecorated(5, dist, static_force=0.05),
@@ -83,12 +83,12 @@ GRID = np.linspace(0.0, 25.0, 51)
 
 def main() -> None:
     out = {"granchain": gc.__version__, "file": gc.__file__, "processor": processor(), "simulate": {}, "ensembles": {}}
-    for name, chain in chains(gc).items():
-        for iname, integ in integrators(gc, name).items():
+    for name, chain in chains().items():
+        for iname, integ in integrators(name).items():
             r = gc.simulate(chain, integ, t_grid=GRID)
             out["simulate"][f"{name} {iname}"] = {f: encode(getattr(r, f)) for f in SIMULATE_FIELDS}
             out["simulate"][f"{name} {iname}"]["status"] = int(r.status)
-    for name, fam in families(gc).items():
+    for name, fam in families().items():
         ds = gc.run_ensemble(fam, realizations=REALIZATIONS, seed=SEED, t_grid=ENSEMBLE_GRID, progress=False)
         out["ensembles"][name] = {v: encode(ds[v].values) for v in sorted(ds.data_vars)
                                   if ds[v].dtype.kind in "fiu"}
