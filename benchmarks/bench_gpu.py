@@ -8,8 +8,9 @@ the same run:
 
 1. ``[1 gpu]``: the paper's decorated N = 26 set (``granchain.RandomDecorated(26)``, small radii
    U[0.01, 0.4]), 30,000 realisations, seed 0, on ``CudaBackend(threads_per_chain=L)`` for L = 32 (one
-   warp per chain), 64 and 1 (one thread per chain: 3,000 realisations, scaled linearly, said in the
-   line); the integration time is the backend's own (``timings``: device time, synchronised, summed
+   warp per chain: warp shuffles with votes, the default; shuffle trees for the integer reductions;
+   128 registers; shared memory), 64 and 1 (one thread per chain: 3,000 realisations, scaled linearly,
+   said in the line); the integration time is the backend's own (``timings``: device time, synchronised, summed
    over the run's batches, the pulse-window pilot included), the wall time is ``run_ensemble``'s; then
    the effective N = 26 set (L = 32). A small warm-up per layout comes first, its time printed apart
    (``[1 compile]``: compilation and first launch).
@@ -114,8 +115,10 @@ class Sizes:
     #: run_ensemble's keywords for every ensemble of the run (none: the defaults).
     ensemble_kw: tuple = ()
     #: The layouts of part 1 (``--layouts``): threads per chain, then optionally the exchange ("shuffle":
-    #: warp shuffles, the default at 32; "shared": shared memory and barriers) and a register cap.
-    layouts: tuple = ("32", "32/shared", "64", "1")
+    #: warp shuffles, the default at 32; "shared": shared memory and barriers), a register cap, and
+    #: "butterfly" (the shuffle exchange's integer reductions by shuffle trees, not warp votes). The
+    #: variants of the default layout first, so that a tight budget skips the slow ones.
+    layouts: tuple = ("32", "32/butterfly", "32/128", "32/shared", "64", "1")
     #: The layout the other parts compare with (the backend's default: one warp per chain, shuffles).
     reference: str = "32"
 
@@ -145,11 +148,17 @@ class StubBackend:
 
 
 def parse_layout(layout) -> tuple:
-    """(threads per chain, exchange or None, max_registers or None) of a layout "L[/exchange][/regs]"."""
+    """(threads per chain, exchange or None, max_registers or None, votes) of a layout
+    "L[/exchange][/regs][/butterfly]" ("butterfly": the shuffle exchange's integer reductions by shuffle
+    trees instead of warp votes). ValueError for anything else."""
     parts = str(layout).split("/")
+    known = ("shuffle", "shared", "butterfly")
+    for p in parts[1:]:
+        if not (p in known or p.isdigit()):
+            raise ValueError(f"unknown layout option {p!r} in {layout!r} (known: {', '.join(known)}, a register count)")
     exchange = next((p for p in parts[1:] if p in ("shuffle", "shared")), None)
     regs = next((int(p) for p in parts[1:] if p.isdigit()), None)
-    return int(parts[0]), exchange, regs
+    return int(parts[0]), exchange, regs, "butterfly" not in parts[1:]
 
 
 def layout_key(layout):
@@ -158,14 +167,14 @@ def layout_key(layout):
 
 
 def gpu_backend(layout, stub: bool):
-    """The GPU backend of a layout (``CudaBackend(threads_per_chain=L, exchange=..., max_registers=...)``;
+    """The GPU backend of a layout (``CudaBackend(threads_per_chain=L, exchange=..., max_registers=..., votes=...)``;
     :func:`parse_layout`), or the stub."""
-    L, exchange, regs = parse_layout(layout)
+    L, exchange, regs, votes = parse_layout(layout)
     if stub:
         return StubBackend(L)
     from granchain.backends.cuda import CudaBackend
 
-    return CudaBackend(threads_per_chain=L, exchange=exchange, max_registers=regs)
+    return CudaBackend(threads_per_chain=L, exchange=exchange, max_registers=regs, votes=votes)
 
 
 def ensemble(run, realizations, seed, chains, *, backend=None, chunk_size=None, threads=None):
@@ -409,7 +418,8 @@ def part_gpu(run: Run) -> None:
                                   f"(compilation and first launch){run.tag}")
             R = s.naive if L == 1 else s.realizations
             if not run.stub:
-                label += f" ({backend.exchange} exchange, max_registers {backend.max_registers})"
+                label += (f" ({backend.exchange} exchange{', warp votes' if backend.votes else ''}, "
+                          f"max_registers {backend.max_registers})")
             scale = s.realizations / R
             ds, kernel, wall, timings = gpu_run(run, backend, chains, R)
         except Exception as exc:  # noqa: BLE001 (one layout failing leaves the others)
@@ -661,8 +671,9 @@ def main(argv=None) -> int:
                                                         "automatic with --smoke where granchain.backends.cuda is missing")
     ap.add_argument("--parts", default="1,2,3,4,5", help="which parts to run, comma-separated (default all: 1,2,3,4,5)")
     ap.add_argument("--layouts", default=None, help="part 1's layouts, comma-separated: threads per chain, then "
-                                                    "optionally /shuffle or /shared and /REGS (a register cap); default "
-                                                    "32,32/shared,64,1")
+                                                    "optionally /shuffle or /shared, /REGS (a register cap) and "
+                                                    "/butterfly (no warp votes); default "
+                                                    "32,32/butterfly,32/128,32/shared,64,1")
     ap.add_argument("--budget", type=float, default=None, help="seconds the run may take; parts that no longer fit are "
                                                                "skipped (default 330 full, 170 smoke)")
     args = ap.parse_args(argv)
@@ -683,7 +694,7 @@ def main(argv=None) -> int:
             for x in layouts:
                 parse_layout(x)
         except ValueError:
-            ap.error(f"--layouts must be layouts such as 32,32/shared,64/128, got {args.layouts!r}")
+            ap.error(f"--layouts must be layouts such as 32,32/shared,64/128,32/butterfly, got {args.layouts!r}")
         if not layouts:
             ap.error("--layouts needs at least one layout")
         sizes = replace(sizes, layouts=layouts)

@@ -13,6 +13,9 @@ import os
 import sys
 
 import numpy as np
+from numba import cuda
+
+from granchain.backends.cuda.device import warp_any, warp_last
 
 
 def batch(n_large: int, realizations: int, kind: str = "decorated", seed: int = 0):
@@ -47,16 +50,18 @@ def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str 
 
 
 def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end: float, windows: bool,
-            repeat: bool = False) -> dict:
+            repeat: bool = False, votes: bool = True) -> dict:
     """The CUDA backend and the CPU's Numba backend on the same batch: every per-realisation result and sum
-    (``repeat``: the GPU run twice, ``"again"`` the second; else ``"again"`` is None)."""
+    (``repeat``: the GPU run twice, ``"again"`` the second, with ``votes`` negated where the exchange is by
+    shuffles (the shuffle trees against the warp votes: the same results); else ``"again"`` is None)."""
     from granchain.backends import get_backend
     from granchain.backends.cuda import CudaBackend
 
     ends = np.linspace(6.0, t_end, n_large) if windows else None  # averaged-pulse windows closing one by one
-    gpu = CudaBackend(threads, exchange=exchange)
+    gpu = CudaBackend(threads, exchange=exchange, votes=votes)
     first = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends)
-    again = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends) if repeat else None
+    other = CudaBackend(threads, exchange=exchange, votes=not votes) if exchange == "shuffle" else gpu
+    again = run_batch(other, n_large, realizations, t_end, pulse_end=ends) if repeat else None
     cpu = run_batch(get_backend("numba"), n_large, realizations, t_end, pulse_end=ends)
     return {"cuda": first, "again": again, "cpu": cpu}
 
@@ -79,6 +84,32 @@ def versus_dop853(threads: int, wall: bool) -> dict:
                      "grid": r.velocity.tolist(), "energy_error": float(r.energy_error),
                      "peak_force": np.asarray(r.peak_force).tolist()}
     return res
+
+
+def _votes_kernel(values, last, any_):
+    """Each lane's ``warp_last`` and ``warp_any`` of ``values`` (a module-level function: the simulator swaps the
+    ``cuda`` of a kernel's module globals for its fake one)."""
+    lane = cuda.threadIdx.x
+    last[lane] = warp_last(values[lane])
+    any_[lane] = warp_any(1 if values[lane] >= 0 else 0)
+
+
+def votes(patterns: list) -> dict:
+    """The warp votes of ``backends.cuda.device`` over one warp, for each pattern of 32 lane values: what
+    ``warp_last`` and ``warp_any`` give every lane."""
+    from granchain.backends.cuda import simulator
+
+    simulator.install()
+    kernel = cuda.jit(_votes_kernel)
+    got = {"last": [], "any": []}
+    for pattern in patterns:
+        values = np.asarray(pattern, dtype=np.int64)
+        last = np.zeros(32, dtype=np.int64)
+        any_ = np.zeros(32, dtype=np.int64)
+        kernel[1, 32](values, last, any_)
+        got["last"].append(last.tolist())
+        got["any"].append(any_.tolist())
+    return got
 
 
 def refusals() -> dict:
@@ -120,7 +151,8 @@ def unavailable() -> dict:
     return {"error": None}
 
 
-CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "refusals": refusals, "unavailable": unavailable}
+CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "votes": votes, "refusals": refusals,
+          "unavailable": unavailable}
 
 if __name__ == "__main__":
     name, args = sys.argv[1], [json.loads(a) for a in sys.argv[2:]]

@@ -67,9 +67,30 @@ def test_granules_spread_over_threads_exchange_through_shared_memory():
 
 @pytest.mark.slow
 def test_one_warp_per_chain_exchanges_by_shuffles():
-    """The GPU's layout (32 threads, warp shuffles; emulated in the simulator): the CPU kernels' results."""
-    res = sim("compare", 32, "shuffle", 2, 1, 6.0, False)
+    """The GPU's layout (32 threads, warp shuffles and votes; emulated in the simulator): the CPU kernels'
+    results, and bitwise the same with the votes' reductions done by shuffle trees instead."""
+    res = sim("compare", 32, "shuffle", 2, 1, 6.0, False, True)
     assert_same_run(res["cuda"], res["cpu"])
+    assert res["again"] == res["cuda"]
+
+
+def test_warp_votes_give_the_last_lanes_value():
+    """The shuffle exchange's integer reductions (``device.warp_last``, ``warp_any``) against NumPy's maximum
+    over the warp, on values that are -1 or grow with the lane: none set, all set, only lane 31 (the ballot's
+    sign bit), random. Negative control: where the values do not grow with the lane, the last lane's value
+    is not the maximum (why the kernel only reduces granule and observed indices this way)."""
+    rng = np.random.default_rng(3)
+    patterns = [[-1] * 32, list(range(32)), [-1] * 31 + [40], [7] + [-1] * 31]
+    for _ in range(6):
+        grows = np.sort(rng.choice(200, size=32, replace=False))
+        patterns.append(np.where(rng.random(32) < 0.3, grows, -1).tolist())
+    control = [-1] * 32
+    control[4], control[20] = 90, 12
+    got = sim("votes", patterns + [control])
+    for pattern, last, any_ in zip(patterns, got["last"][:-1], got["any"][:-1]):
+        assert last == [max(pattern)] * 32, pattern
+        assert any_ == [int(max(pattern) >= 0)] * 32, pattern
+    assert got["last"][-1] == [12] * 32 != [max(control)] * 32
 
 
 @pytest.mark.slow

@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from .. import Backend, BackendUnavailable, effective_integrator
+from .. import Backend, BackendUnavailable, effective_integrator, longest_first
 
 __all__ = ["CudaBackend", "available"]
 
@@ -53,7 +53,10 @@ def available() -> tuple[bool, str]:
 
 class CudaBackend(Backend):
     """RKN4 for elastic chains on an NVIDIA GPU; ``threads_per_chain`` chooses the layout (see
-    :data:`LAYOUTS`). ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch:
+    :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp shuffles, the
+    default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's integer
+    reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
+    ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch:
     the device time of the integration and the reduction, synchronised, transfers excluded."""
 
     name = "cuda"
@@ -66,7 +69,8 @@ class CudaBackend(Backend):
     #: slowest chain ends, so the paper's 30,000 go in one.
     default_chunk_size = 30_000
 
-    def __init__(self, threads_per_chain: int = 32, max_registers: int | None = None, exchange: str | None = None):
+    def __init__(self, threads_per_chain: int = 32, max_registers: int | None = None, exchange: str | None = None,
+                 votes: bool = True):
         ok, why = available()
         if not ok:
             raise BackendUnavailable(f"the cuda backend cannot run here: {why}. Use the CPU backend "
@@ -85,6 +89,7 @@ class CudaBackend(Backend):
         self.threads_per_chain = int(threads_per_chain)
         self.max_registers = max_registers
         self.exchange = exchange
+        self.votes = bool(votes) and exchange == "shuffle"
         self.timings: list = []
         self._kernels: dict = {}
 
@@ -114,7 +119,7 @@ class CudaBackend(Backend):
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
         if (L, G) not in self._kernels:
-            self._kernels[(L, G)] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle")
+            self._kernels[(L, G)] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes)
         return L, G, self._kernels[(L, G)]
 
     # ------------------------------------------------------------------ runs
@@ -199,7 +204,7 @@ class CudaBackend(Backend):
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.
-        order = _longest_first(masses, stiffness)
+        order = longest_first(masses, stiffness)
         masses, stiffness, v0, t_max = masses[order], stiffness[order], np.asarray(v0)[order], np.asarray(t_max)[order]
         per = max(1, min(R, int(GRID_BYTES // max(1, T * K * 8))))
         const = [cuda.to_device(np.ascontiguousarray(a)) for a in (obs_of, observed, np.asarray(t_grid, float), ends, prm)]
@@ -260,21 +265,11 @@ KERNEL_OUTPUTS = ("peak_velocity", "peak_time", "peak_force", "peak_force_time",
                   "frozen_potential", "positions", "velocities")
 
 
-def _longest_first(masses, stiffness) -> np.ndarray:
-    """The rows in decreasing order of their fastest contact oscillation, max_j sqrt(c_j / min(m_j, m_j+1)):
-    an adaptive step follows the lightest granule squeezed by its stiffest contact, so this orders the rows
-    by their expected number of steps (stable: equal rows keep their order)."""
-    c = np.asarray(stiffness, dtype=float)[:, : masses.shape[1] - 1]
-    lightest = np.minimum(masses[:, :-1], masses[:, 1:])
-    rate = np.max(np.sqrt(c / lightest), axis=1) if c.shape[1] else np.zeros(masses.shape[0])
-    return np.argsort(-rate, kind="stable")
-
-
 _SUMS: dict = {}
 
 
 def make_sum_kernel_cached():
-    from .kernel import make_sum_kernel
+    from .sums import make_sum_kernel
 
     if "v" not in _SUMS:
         _SUMS["v"] = make_sum_kernel()
@@ -282,7 +277,7 @@ def make_sum_kernel_cached():
 
 
 def make_wall_sum_kernel_cached():
-    from .kernel import make_wall_sum_kernel
+    from .sums import make_wall_sum_kernel
 
     if "f" not in _SUMS:
         _SUMS["f"] = make_wall_sum_kernel()

@@ -27,9 +27,8 @@ this changes nothing, and the threads that hold them would idle anyway); the tra
 pulse is the CPU's (``kernels.window``). Elastic power-law contacts (Hertz, n = 5/2, or any n), free end or fixed wall, no
 precompression and no damping: what else a chain declares is refused by ``CudaBackend.check``.
 
-The averaged pulse is reduced by :func:`make_sum_kernel`: one thread per (grid time, granule) adds
-the fixed-point values of the successful realisations in realisation order, integers, so a run gives
-the same sums every time and the same sums as the CPU kernels for the same velocities.
+The device functions the step loop calls (the force, the dense output, the root search) are in
+``granchain.backends.cuda.device``; the averaged pulse is reduced by ``granchain.backends.cuda.sums``.
 """
 
 from __future__ import annotations
@@ -42,7 +41,6 @@ from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
 
 # The method's tables, the step control's constants and the stop and window rules: the CPU kernels' own
 # numbers (one source; the GPU code below is the CPU's written for CUDA).
-from ..kernels import dense as _dense
 from ..kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN, pi_exponent
 from ..kernels.rkn4 import (
     A10,
@@ -69,152 +67,29 @@ from ..kernels.rkn4 import (
 from ..kernels.schemes import RKN4
 from ..kernels.stop import RATTLER_MASS_RATIO
 from ..kernels.window import CUT_FORCE
+from .device import (
+    FULL_MASK,
+    contact_force,
+    cut_target,
+    dense_v,
+    dense_x,
+    falls,
+    hermite_max_estimate,
+    root,
+    warp_any,
+    warp_last,
+)
 
 #: The PI controller's exponent of RKN4(3)'s error estimate (the CPU step loop's, ``rkloop.pi_exponent``).
 ALPHA_RKN4 = pi_exponent(RKN4)
 
-FULL_MASK = 0xFFFFFFFF  # every lane of a warp (the shuffle exchange)
 
 #: Layout of the float settings array ``prm`` the kernel reads.
 (P_RTOL, P_ATOL, P_FIRST, P_RELAX_LAG, P_RELAX_FACTOR, P_WINDOW_LAG, P_EXIT_MARGIN, P_PEAK_RTOL, P_MAX_STEPS, P_N,
  P_STOP_AT_EXIT, P_WALL, P_T_NEEDED, P_WINDOWS, P_SIZE) = range(15)
 
 
-@cuda.jit(device=True)
-def contact_force(d, c, n):
-    """c d^(n-1) for d > 0, else 0 (Eq. motion_rescaled; Hertz's power by a square root)."""
-    if d <= 0.0:
-        return 0.0
-    if n == 2.5:
-        return c * d * math.sqrt(d)
-    if n == 2.0:
-        return c * d
-    return c * d ** (n - 1.0)
-
-
-@cuda.jit(device=True)
-def hermite_x(x0, v0, a0, x1, v1, a1, h, t):
-    """Position at theta = t on the quintic Hermite interpolant through (x, v, a) at both ends of a step
-    (``kernels.rkn4.weights``)."""
-    t2 = t * t
-    t3 = t2 * t
-    t4 = t3 * t
-    t5 = t4 * t
-    q0 = t - 6 * t3 + 8 * t4 - 3 * t5
-    q1 = 10 * t3 - 15 * t4 + 6 * t5
-    q2 = 0.5 * t2 - 1.5 * t3 + 1.5 * t4 - 0.5 * t5
-    q3 = 0.5 * t3 - t4 + 0.5 * t5
-    q6 = -4 * t3 + 7 * t4 - 3 * t5
-    return x0 + h * (v0 * q0 + (x1 - x0) / h * q1 + h * a0 * q2 + h * a1 * q3 + v1 * q6)
-
-
-@cuda.jit(device=True)
-def hermite_v(x0, v0, a0, x1, v1, a1, h, t):
-    """Velocity (the derivative of :func:`hermite_x`) at theta = t."""
-    t2 = t * t
-    t3 = t2 * t
-    t4 = t3 * t
-    q0 = t - 4.5 * t2 + 6 * t3 - 2.5 * t4
-    q1 = 30 * t2 - 60 * t3 + 30 * t4
-    q2 = -18 * t2 + 32 * t3 - 15 * t4
-    q3 = -12 * t2 + 28 * t3 - 15 * t4
-    q6 = 1.5 * t2 - 4 * t3 + 2.5 * t4
-    return v0 + h * (a0 * q0 + (x1 - x0) / (h * h) * q1 + v0 / h * q2 + v1 / h * q3 + a1 * q6)
-
-
-@cuda.jit(device=True)
-def dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t):
-    return hermite_x(hx0[k], hv0[k], ha0[k], hx1[k], hv1[k], ha1[k], h, t)
-
-
-@cuda.jit(device=True)
-def dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t):
-    return hermite_v(hx0[k], hv0[k], ha0[k], hx1[k], hv1[k], ha1[k], h, t)
-
-
-@cuda.jit(device=True)
-def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, n):
-    """Acceleration of granule k from the dense-output positions of it and its neighbours."""
-    xk = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
-    left = 0.0
-    right = 0.0
-    if k > 0:
-        left = contact_force(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk, c_left, n)
-    if k < M - 1:
-        right = contact_force(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), c_right, n)
-    return (left - right) * inv_m
-
-
-@cuda.jit(device=True)
-def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_left, c_right, inv_m, n):
-    """First theta in [0, 1] where the followed function stops being positive (``kernels.dense.first_root``:
-    Illinois while the bracket has a strictly negative end, bisection while it ends on an exact zero):
-    ``what`` 0, granule k's acceleration (its velocity maximum); 1, contact k's relative velocity (its
-    compression maximum)."""
-    lo = 0.0
-    hi = 1.0
-    side = 0
-    for _ in range(200):
-        if f_hi < 0.0:
-            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            if not (lo < theta < hi):
-                theta = 0.5 * (lo + hi)
-        else:
-            theta = 0.5 * (lo + hi)
-        if what == 0:
-            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_left, c_right, inv_m, n)
-        else:
-            f = (dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                 - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta))
-        if f > 0.0:
-            lo = theta
-            f_lo = f
-            if side == -1:
-                f_hi *= 0.5
-            side = -1
-        else:
-            hi = theta
-            f_hi = f
-            if side == 1:
-                f_lo *= 0.5
-            side = 1
-        if hi - lo < 1e-14:
-            break
-    return hi
-
-
-@cuda.jit(device=True)
-def falls(f0, f1):
-    return f0 > 0.0 and f1 <= 0.0
-
-
-#: ``kernels.dense.hermite_max_estimate`` (plain arithmetic): the CPU's own function compiled for the GPU.
-hermite_max_estimate = cuda.jit(device=True)(_dense.hermite_max_estimate.py_func)
-
-
-@cuda.jit(device=True)
-def rint(x):
-    """Round half to even (NumPy's ``rint``, which the CPU kernels' fixed-point sums use)."""
-    f = math.floor(x)
-    d = x - f
-    if d > 0.5 or (d == 0.5 and f - 2.0 * math.floor(0.5 * f) != 0.0):
-        f += 1.0
-    return f
-
-
-@cuda.jit(device=True)
-def cut_target(front, window_lag, windows, q_open, obs):
-    """The granule the trailing window may cut behind: observed granule front - window_lag, never past
-    one whose averaged-pulse window is still open (``q_open``); -1 while there is none."""
-    if window_lag <= 0 or front < window_lag:
-        return int64(-1)
-    target = front - window_lag
-    if windows:
-        target = min(target, q_open)
-    return obs[target]
-
-
-def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False):
+def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False, votes: bool = True):
     """The RKN4 batch kernel for ``L`` threads per chain and ``G`` granules per thread (chains of up to
     ``L * G`` granules). ``L`` and ``G`` are constants of its code: Numba prunes the barriers of
     ``L = 1`` and sizes the per-thread arrays by ``G``. ``max_registers`` caps the registers per thread
@@ -227,10 +102,19 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
 
     ``shuffle`` (``L`` = 32, one warp per chain): the neighbours' positions and every reduction of a step
     go through warp shuffles instead, with no barrier at all in a step without a peak or grid time (Numba's
-    simulator has no shuffles: the tests run the shared-memory exchange, the benchmark both)."""
+    simulator has no shuffles: ``simulator.install`` emulates them, so the tests run both exchanges).
+
+    ``votes`` (with ``shuffle``): the step's integer reductions (is there a peak candidate, which contact
+    the trailing window cuts, how far the front has come, is the exit blocked) by warp votes instead of
+    shuffle trees. Each is a flag, or an index that is -1 or grows with the granules a thread owns (lane l
+    holds granules l G .. l G + G - 1, and the observed granules are strictly increasing), so the group's
+    maximum is the value of the last lane that has one: one ballot and one 32-bit shuffle, where a
+    butterfly of 64-bit maxima takes five shuffle rounds of two instructions each. Same results bit for
+    bit (integers); ``votes=False`` keeps the butterflies for the benchmark's comparison."""
     MMAX = L * G
     GROUP = L > 1
     SHUFFLE = bool(shuffle)
+    VOTES = SHUFFLE and bool(votes)
     if SHUFFLE and L != 32:
         raise ValueError("the shuffle exchange needs one warp (32 threads) per chain")
     options = {} if max_registers is None else {"max_registers": max_registers}
@@ -255,6 +139,21 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
         for l in range(1, L):
             m = max(m, red[l])
         return m
+
+    @cuda.jit(device=True)
+    def group_any(flag, red, lane):
+        """1 where ``flag`` (0 or 1) is 1 on any thread of the group, else 0 (every thread gets it)."""
+        if VOTES:
+            return warp_any(flag)
+        return group_max(flag, red, lane)
+
+    @cuda.jit(device=True)
+    def group_last(value, red, lane):
+        """The maximum over the group of ``value``, which is -1 or grows with the lane (an index of one of the
+        thread's own granules or observed granules): with votes, the value of the last lane that has one."""
+        if VOTES:
+            return warp_last(value)
+        return group_max(value, red, lane)
 
     @cuda.jit(device=True)
     def group_sum(value, red, lane):
@@ -571,9 +470,9 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                            vs[s] - (vs[s + 1] if s < G - 1 else vr1)):
                         cand = 1
             j_open, j_weak = cut_candidates(target, own, lo, M, xs, xr1, c_right, n)
-            need = group_max(cand, red_c, lane)
-            j_open = group_max(j_open, red_o, lane)
-            j_weak = group_max(j_weak, red_f, lane)
+            need = group_any(cand, red_c, lane)
+            j_open = group_last(j_open, red_o, lane)
+            j_weak = group_last(j_weak, red_f, lane)
             if g < T and t_grid[g] <= t + h:
                 need = 1
             if need > 0:
@@ -633,15 +532,15 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                 - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), c_right[s], n)
                     g += 1
                 before = front
-                front = max(front, group_max(found, red_q, lane))
+                front = max(front, group_last(found, red_q, lane))
                 if relax_lag > 0 and front >= relax_lag:
                     relaxed = obs[front - relax_lag]
                 if front != before and window_lag > 0:
                     # The front moved in this step: the cut is decided behind the new one (as the CPU does).
                     target = cut_target(front, window_lag, windows, q_open, obs)
                     j_open, j_weak = cut_candidates(target, own, lo, M, xs, xr1, c_right, n)
-                    j_open = group_max(j_open, red_o, lane)
-                    j_weak = group_max(j_weak, red_f, lane)
+                    j_open = group_last(j_open, red_o, lane)
+                    j_weak = group_last(j_weak, red_f, lane)
 
             # The trailing window's cut: granules lo..new_lo-1 leave it with the potential of the contacts
             # among them (the contact at the new edge is open, or holds less than CUT_FORCE).
@@ -681,7 +580,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         i = own + s
                         if i >= lo and i < M - 1 and v[s] >= v_m1 and mass[s] >= m_min:
                             blocked = 1
-                    out_now = group_max(blocked, red_b, lane) == 0
+                    out_now = group_any(blocked, red_b, lane) == 0
                 if out_now:
                     if exit_since < 0.0:
                         exit_since = t
@@ -732,50 +631,3 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
             frozen_out[r] = frozen
 
     return kernel
-
-
-def make_sum_kernel():
-    """The fixed-point sums of the averaged pulse over a batch: thread (g, q) adds round(v 2^bits) and
-    round(v^2 2^bits) of the successful realisations, in realisation order (integers: exact, and the
-    same sums as ``kernels.batch.accumulate_fixed_point``)."""
-
-    @cuda.jit
-    def sums(grid_v, status, scale, sum_v, sum_v2):
-        T = grid_v.shape[1]
-        K = grid_v.shape[2]
-        idx = cuda.grid(1)
-        if idx >= T * K:
-            return
-        g = idx // K
-        q = idx - g * K
-        s1 = int64(0)
-        s2 = int64(0)
-        for r in range(grid_v.shape[0]):
-            if status[r] == SUCCESS:
-                w = grid_v[r, g, q]
-                if w != 0.0:
-                    s1 += int64(rint(w * scale))
-                    s2 += int64(rint(w * w * scale))
-        sum_v[g, q] += s1
-        sum_v2[g, q] += s2
-
-    return sums
-
-
-def make_wall_sum_kernel():
-    """The wall force's fixed-point sum on the grid (``kernels.batch.accumulate_fixed_point_1d``)."""
-
-    @cuda.jit
-    def sums(grid_f, status, scale, sum_f):
-        g = cuda.grid(1)
-        if g >= grid_f.shape[1]:
-            return
-        s = int64(0)
-        for r in range(grid_f.shape[0]):
-            if status[r] == SUCCESS:
-                w = grid_f[r, g]
-                if w != 0.0:
-                    s += int64(rint(w * scale))
-        sum_f[g] += s
-
-    return sums

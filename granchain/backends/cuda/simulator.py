@@ -1,8 +1,8 @@
 """Warp shuffles for Numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``), which has none.
 
 The GPU kernels exchange neighbours' positions and reduce the error norm with ``cuda.shfl_*_sync``; the
-simulator, which runs a kernel's threads as Python threads, lacks those intrinsics. :func:`install`
-adds them to its fake ``cuda`` module, each a block-wide exchange between two barriers (the kernels
+simulator, which runs a kernel's threads as Python threads, lacks those intrinsics and the warp vote
+``cuda.ballot_sync``. :func:`install` adds them to its fake ``cuda`` module, each a block-wide exchange between two barriers (the kernels
 that shuffle run one warp per block, so block and warp coincide): slow, but the same code as on the GPU,
 so that machines without one (CI) test the shuffle path too. Nothing happens outside the simulator.
 """
@@ -25,9 +25,21 @@ def _exchange(module, value, source_lane):
     return got
 
 
+def _ballot(module, predicate):
+    """The bits of the warp's lanes whose ``predicate`` holds (an unsigned 32-bit value, lane l at bit l)."""
+    thread = threading.current_thread()
+    tid = thread.thread_id
+    base = tid - tid % 32
+    slots = module.__dict__.setdefault("_granchain_ballot", {})
+    thread.syncthreads()
+    slots[tid] = bool(predicate)
+    thread.syncthreads()
+    return sum(1 << lane for lane in range(32) if slots.get(base + lane, False))
+
+
 def install() -> None:
-    """Add ``shfl_sync``, ``shfl_up_sync``, ``shfl_down_sync`` and ``shfl_xor_sync`` to the simulator's
-    fake ``cuda`` module (once; a no-op outside the simulator, or where it has them)."""
+    """Add ``shfl_sync``, ``shfl_up_sync``, ``shfl_down_sync``, ``shfl_xor_sync`` and ``ballot_sync`` to the
+    simulator's fake ``cuda`` module (those it lacks; a no-op outside the simulator)."""
     from numba import config
 
     if not config.ENABLE_CUDASIM:
@@ -35,11 +47,15 @@ def install() -> None:
     from numba.cuda.simulator import kernelapi
 
     module = kernelapi.FakeCUDAModule
-    if hasattr(module, "shfl_sync"):
-        return
-    module.shfl_sync = lambda self, mask, value, src: _exchange(self, value, lambda lane: src)
-    module.shfl_up_sync = lambda self, mask, value, delta: _exchange(
-        self, value, lambda lane: lane - delta if lane >= delta else lane)
-    module.shfl_down_sync = lambda self, mask, value, delta: _exchange(
-        self, value, lambda lane: lane + delta if lane + delta < 32 else lane)
-    module.shfl_xor_sync = lambda self, mask, value, bits: _exchange(self, value, lambda lane: lane ^ bits)
+    emulations = {
+        "shfl_sync": lambda self, mask, value, src: _exchange(self, value, lambda lane: src),
+        "shfl_up_sync": lambda self, mask, value, delta: _exchange(
+            self, value, lambda lane: lane - delta if lane >= delta else lane),
+        "shfl_down_sync": lambda self, mask, value, delta: _exchange(
+            self, value, lambda lane: lane + delta if lane + delta < 32 else lane),
+        "shfl_xor_sync": lambda self, mask, value, bits: _exchange(self, value, lambda lane: lane ^ bits),
+        "ballot_sync": lambda self, mask, predicate: _ballot(self, predicate),
+    }
+    for name, emulation in emulations.items():
+        if not hasattr(module, name):  # a simulator that has one keeps its own
+            setattr(module, name, emulation)
