@@ -544,3 +544,79 @@ def test_kernel_cache_follows_edits_of_the_integrator(tmp_path):
     assert after["ensemble"] == after["simulate"], (
         f"run_ensemble used a stale compiled kernel: {after['ensemble']} steps, simulate {after['simulate']}"
     )
+
+
+def _python_rate_during(call) -> tuple:
+    """(increments per second a Python thread counts while ``call()`` runs in this one, the same with this
+    thread asleep): how much a Python helper thread gets done beside a compiled call."""
+    import threading
+
+    count = [0]
+    stop = threading.Event()
+
+    def counter():
+        while not stop.is_set():
+            count[0] += 1
+
+    helper = threading.Thread(target=counter, daemon=True)
+    helper.start()
+    try:
+        time.sleep(0.05)
+        n0, t0 = count[0], time.perf_counter()
+        time.sleep(0.2)
+        free = (count[0] - n0) / (time.perf_counter() - t0)
+        n0, t0 = count[0], time.perf_counter()
+        call()
+        during = (count[0] - n0) / (time.perf_counter() - t0)
+    finally:
+        stop.set()
+        helper.join()
+    return during, free
+
+
+def test_the_ensemble_kernel_releases_the_gil(monkeypatch):
+    """The helper thread that draws the next chunk's parameters and writes the last chunk (``run._run_local``)
+    works beside the kernels only if they release the GIL: a Python thread keeps counting while the
+    ensemble kernel runs. Negative control: beside a compiled loop that holds the GIL it all but stops."""
+    import math
+
+    from granchain.backends import numba_backend
+
+    kernel = numba_backend.integrate_batch
+    rates = []
+    monkeypatch.setattr(numba_backend, "integrate_batch",
+                        lambda *a, **k: rates.append(_python_rate_during(lambda: kernel(*a, **k))))
+    gc.run_ensemble(gc.RandomDecorated(26), realizations=48, chains="decorated", chunk_size=48, threads=1,
+                    pulse_window="full", progress=False)
+    (during, free), = rates
+    assert during > 0.3 * free, (during, free)
+
+    @numba.njit(nogil=False)
+    def holds_the_gil(n):
+        x = 0.0
+        for i in range(n):
+            x = math.sin(x + i)
+        return x
+
+    holds_the_gil(10)
+    during, free = _python_rate_during(lambda: holds_the_gil(20_000_000))
+    assert during < 0.1 * free, (during, free)
+
+
+def test_the_order_realisations_are_started_in_changes_no_result(monkeypatch):
+    """The CPU kernel starts a batch's realisations longest first (``backends.longest_first``); started in
+    any other order (reversed, shuffled) every per-realisation result and sum is bitwise the same, and each
+    row is its own realisation's (a kernel that wrote row j for the j-th started would fail here)."""
+    from granchain.backends import numba_backend
+
+    def run():
+        return gc.run_ensemble(gc.RandomDecorated(6), realizations=24, seed=5, chunk_size=24, progress=False,
+                               pulse_window="full")
+
+    plain = run()
+    rng = np.random.default_rng(0)
+    for order in (lambda m, c: np.arange(m.shape[0])[::-1], lambda m, c: rng.permutation(m.shape[0])):
+        monkeypatch.setattr(numba_backend, "longest_first", order)
+        other = run()
+        for name in plain.data_vars:
+            assert plain[name].values.tobytes() == other[name].values.tobytes(), name

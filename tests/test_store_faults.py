@@ -430,6 +430,42 @@ def test_no_lock_file_after_an_interrupted_run(reference, tmp_path, monkeypatch)
     assert not os.path.exists(f"{path}.lock")
 
 
+def test_an_interruption_waits_for_the_chunk_being_written(reference, tmp_path, monkeypatch):
+    """The chunks are written by a helper thread while the next chunk's kernels run: Ctrl-C during chunk 2,
+    with chunk 1 still being written, leaves chunks 0 and 1 in the store, and the resumed run computes
+    only the rest and ends bitwise as the uninterrupted one."""
+    from granchain.ensembles import run as ens
+    from granchain.ensembles.sinks import ZarrSink
+
+    compute, write = ens.compute_chunk, ZarrSink.write
+    written, computed = [], []
+
+    def slow_write(self, res):
+        time.sleep(0.5)  # chunk 2 starts, and is interrupted, while chunk 1 is being written
+        write(self, res)
+        written.append(res["chunk"])
+
+    def interrupted_at_chunk_2(spec, j, **kw):
+        if j == 2:
+            raise KeyboardInterrupt
+        return compute(spec, j, **kw)
+
+    def counted(spec, j, **kw):
+        computed.append(j)
+        return compute(spec, j, **kw)
+
+    path = tmp_path / "interrupted.zarr"
+    monkeypatch.setattr(ZarrSink, "write", slow_write)
+    monkeypatch.setattr(ens, "compute_chunk", interrupted_at_chunk_2)
+    with pytest.raises(ens.EnsembleInterrupted):
+        _run(path)
+    assert written == [0, 1]
+    monkeypatch.setattr(ens, "compute_chunk", counted)
+    _run(path)
+    assert computed == [2, 3]
+    assert_same_store(path, reference)
+
+
 def test_the_lock_file_is_there_while_held_and_a_second_writer_is_refused(tmp_path):
     from granchain.ensembles.lock import StoreLockedError
 

@@ -22,8 +22,10 @@ from .store import Variable
 PROGRESS_SECONDS = 2.0
 
 
-def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_progress=None) -> dict:
+def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_progress=None, params=None) -> dict:
     """Results of chunk j: the family's random parameters, per-realisation results and fixed-point sums.
+    ``params``: the family's parameters of the chunk's realisations, drawn already
+    (``ChainFamily.draw_batch``; drawn here where None).
 
     A top-level function so that Dask can ship it to workers. ``on_progress(k)`` (local runs) is
     called after every batch of k realisations; the batches are an implementation detail that does
@@ -33,7 +35,7 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_pro
     left alone: a GPU fills its cores only with thousands of chains per launch.
     """
     if not _backend.runs_on_cpu(spec.backend):
-        res = _compute_chunk(spec, j)
+        res = _compute_chunk(spec, j, params=params)
         if on_progress is not None:
             on_progress(res["realizations"])
         return res
@@ -44,7 +46,7 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_pro
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     try:
         if on_progress is None:
-            return _compute_chunk(spec, j)
+            return _compute_chunk(spec, j, params=params)
         # Batches for progress within a chunk: a small first batch measures the rate, then each batch
         # is about PROGRESS_SECONDS of work. Small batches cost speed (a parallel-kernel launch and
         # its set-up per batch, and load imbalance between threads over few realisations of very
@@ -56,7 +58,8 @@ def compute_chunk(spec: EnsembleSpec, j: int, threads: int | None = None, on_pro
         while start < sl.stop:
             stop = min(start + step, sl.stop)
             t0 = time.perf_counter()
-            parts.append(_compute_chunk(spec, j, slice(start, stop)))
+            part = None if params is None else {k: a[start - sl.start:stop - sl.start] for k, a in params.items()}
+            parts.append(_compute_chunk(spec, j, slice(start, stop), part))
             elapsed = time.perf_counter() - t0
             on_progress(parts[-1]["realizations"])
             step = max(step, int((stop - start) * PROGRESS_SECONDS / max(elapsed, 1e-3)))
@@ -136,16 +139,17 @@ def chunk_buffers(spec: EnsembleSpec, realizations: int) -> dict:
     return out
 
 
-def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None) -> dict:
+def _compute_chunk(spec: EnsembleSpec, j: int, sl: slice | None = None, params: dict | None = None) -> dict:
     """Chunk j (or its realisations ``sl``): a dict holding every :func:`~granchain.ensembles.schema.chunk_variables`
     entry under its name (per-realisation arrays over the realisations computed, the progress sums without
-    their ``chunk`` dim), plus ``chunk`` and ``realizations``."""
+    their ``chunk`` dim), plus ``chunk`` and ``realizations``. ``params``: the family's parameters of those
+    realisations where drawn already."""
     from .store import progress_sum_variables, result_variables
 
     sl = spec.chunk_slice(j) if sl is None else sl
     idx = np.arange(sl.start, sl.stop)
     family = spec.family
-    params = family.draw_batch(spec.seed, idx)
+    params = family.draw_batch(spec.seed, idx) if params is None else params
     buffers = chunk_buffers(spec, idx.size)
     scale = float(2.0**spec.fixed_point_bits)
     for ci, name in enumerate(spec.chains):

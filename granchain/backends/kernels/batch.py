@@ -110,9 +110,11 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     ``tally.lags`` (L,), also adds the aligned pulse's sums (``aligned``) into sum_a / sum_a2 (int64,
     (L, K)); with an empty one those stay untouched. ``partials``: zeroed per-thread partial sums from
     :func:`thread_sums` for numba.get_num_threads() threads (their first axis), added into ``sums``
-    at the end.
+    at the end. The threads take the rows one at a time in the order ``batch.order``: no result depends
+    on it.
     """
     masses, stiffness, v_init, t_limit = batch.masses, batch.stiffness, batch.initial_velocity, batch.t_max
+    order = batch.order
     # Rebuilt by a call: Numba's parallel lowering passes a named tuple into the loop body only when
     # it finds the call (or argument) that made it, not a field read (batch.params).
     params = Params(*batch.params)
@@ -130,7 +132,8 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     T = t_grid.shape[0]
     L = lags.shape[0]
     n_threads = cnt.shape[0]
-    for r in prange(R):
+    for j in prange(R):
+        r = order[j]
         tid = numba.get_thread_id()
         m = masses[r]
         c = stiffness[r]

@@ -35,8 +35,10 @@ JIT_INTERNAL = dict(JIT, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 #: ``parallel=True`` Numba also turns array expressions and allocations (the ``np.zeros`` of each
 #: realisation's arrays, inside the loop) into parallel loops of their own, which it then runs serially
 #: there: ~0.6 s more compilation of the ensemble kernel and nothing at run time.
-JIT_PARALLEL = dict(JIT, parallel=dict(prange=True, comprehension=False, setitem=False, reduction=False, numpy=False,
-                                       stencil=False, fusion=False, inplace_binop=False))
+#: ``nogil``: the calling thread releases the GIL while the loop runs, so that the ensemble's helper thread
+#: draws the next chunk and writes the last one meanwhile (``ensembles.run._run_local``).
+JIT_PARALLEL = dict(JIT, nogil=True, parallel=dict(prange=True, comprehension=False, setitem=False, reduction=False,
+                                                   numpy=False, stencil=False, fusion=False, inplace_binop=False))
 
 
 def named(tag: str):
