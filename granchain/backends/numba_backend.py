@@ -163,18 +163,17 @@ class NumbaBackend(Backend):
         ends = no_windows() if pulse_end is None else kernel_array(pulse_end)
         run = Run(kernel_array(observed, np.int64), kernel_array(t_grid), float(limits.max()), first.ends_at_exit,
                   controls.exit_margin, controls.max_steps, controls.peak_rtol, no_contacts(), ends)
-        # Dynamic scheduling, one realisation at a time, longest first. Realisations differ in cost by up
-        # to 16x (N = 6 decorated chains), and Numba's default static split (each thread a contiguous
-        # half of the batch) left a thread idle for 1.2-3.6 % of a 1000-realisation chunk of the
-        # paper's set (computed from its per-realisation step counts; 0.1 % dynamic). On 16 threads the
-        # last realisations started decide when a chunk ends: the paper's decorated N = 26 chains (steps
-        # 4,187 to 78,279 in 4,000 realisations) kept 16 threads busy 95.2 % of a 500-realisation chunk
-        # in index order and 99.3 % longest first (computed the same way; 99.9 % and 99.97 % on 2). Results
-        # do not change: realisations are independent and the sums are integers (test_ensemble). The
-        # per-thread sums are allocated here, not in the kernel (see thread_sums).
+        # The threads take the realisations one at a time, longest first (``kernels.queue``: Numba's prange
+        # gives each thread a fixed block, whatever its chunk size). Realisations differ in cost by up to 19x
+        # (the paper's decorated N = 26 chains: 4,187 to 78,279 steps in 4,000 realisations), and on 16
+        # threads the last ones taken decide when a chunk ends: computed from those step counts, 16 threads
+        # are busy 81.3 % of a 500-realisation chunk split in fixed blocks, 95.2 % taking them one at a time
+        # in index order, 99.3 % longest first (on 2 threads: 97.9 %, 99.9 %, 99.97 %). Results do not
+        # change: realisations are independent and the sums are integers (test_ensemble). The per-thread
+        # sums are allocated here, not in the kernel (see thread_sums).
         params = model_params(first)
         batch = Batch(kernel_array(masses), kernel_array(stiffness), initial_velocity, params, limits,
-                      longest_first(masses, stiffness).astype(np.int64))
+                      longest_first(masses, stiffness).astype(np.int64), np.zeros(1, dtype=np.int64))
         # (buffers the schema holds only for some chains, a wall or a dissipative law: the kernel writes them
         # for those alone, and gets scratch otherwise)
         R = masses.shape[0]
@@ -183,9 +182,8 @@ class NumbaBackend(Backend):
         entry = chain_kernel(method.kind, params)
         warm.wait_for(entry)  # a helper process compiling it into the cache (a first run of both chains)
         kernel = kernel_function(entry, *row_records(batch, method, run, rows))
-        with numba.parallel_chunksize(1):
-            integrate_batch(
-                kernel, batch, method, run, Tally(contacts, float(scale), lags), rows,
-                Sums(out["sum_v"], out["sum_v2"], out["sum_wall"], out["n_valid"], sum_a, sum_a2),
-                thread_sums(numba.get_num_threads(), t_grid.size, observed.shape[0], lags.size),
-            )
+        integrate_batch(
+            kernel, batch, method, run, Tally(contacts, float(scale), lags), rows,
+            Sums(out["sum_v"], out["sum_v2"], out["sum_wall"], out["n_valid"], sum_a, sum_a2),
+            thread_sums(numba.get_num_threads(), t_grid.size, observed.shape[0], lags.size),
+        )

@@ -26,6 +26,7 @@ from numba import njit, prange
 
 from ..._status import SUCCESS
 from .aligned import accumulate_aligned
+from .queue import take
 from .forces import final_energy, impulse_energy, plastic_energy
 from .jit import JIT, JIT_PARALLEL
 from .records import (
@@ -80,7 +81,8 @@ def thread_sums(n_threads, T, K, L):
 
     The caller allocates them: allocated inside the parallel kernel, before its ``prange`` loop,
     arrays that the loop writes cost time in proportion to their size for every scheduling chunk
-    under dynamic scheduling (``numba.parallel_chunksize``; measured with Numba 0.68: 2.4 ms per
+    under ``numba.parallel_chunksize(1)``, which this kernel ran under before its rows came from a queue
+    (measured with Numba 0.68: 2.4 ms per
     iteration for two (2, 2686, 101) arrays, nothing when they are arguments; an N = 101 windowed
     realisation took 25.4 instead of 14.8 ms)."""
     return Partials(np.zeros((n_threads, T, K), dtype=np.int64), np.zeros((n_threads, T, K), dtype=np.int64),
@@ -110,11 +112,12 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     ``tally.lags`` (L,), also adds the aligned pulse's sums (``aligned``) into sum_a / sum_a2 (int64,
     (L, K)); with an empty one those stay untouched. ``partials``: zeroed per-thread partial sums from
     :func:`thread_sums` for numba.get_num_threads() threads (their first axis), added into ``sums``
-    at the end. The threads take the rows one at a time in the order ``batch.order``: no result depends
-    on it.
+    at the end. Each thread takes the rows one at a time, in the order ``batch.order``, from the queue
+    ``batch.taken`` (``queue``: numba's prange gives each thread a fixed block): no result depends on which
+    thread integrates which row.
     """
     masses, stiffness, v_init, t_limit = batch.masses, batch.stiffness, batch.initial_velocity, batch.t_max
-    order = batch.order
+    order, taken = batch.order, batch.taken
     # Rebuilt by a call: Numba's parallel lowering passes a named tuple into the loop body only when
     # it finds the call (or argument) that made it, not a field read (batch.params).
     params = Params(*batch.params)
@@ -132,45 +135,49 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
     T = t_grid.shape[0]
     L = lags.shape[0]
     n_threads = cnt.shape[0]
-    for j in prange(R):
-        r = order[j]
+    for _ in prange(n_threads):  # one iteration per thread; the rows come from the queue
         tid = numba.get_thread_id()
-        m = masses[r]
-        c = stiffness[r]
-        x = np.zeros(M)
-        v = np.zeros(M)
-        v[0] = v_init[r]  # the impulse on granule 1 (granchain.model.contacts.Impulse)
-        # each contact's largest overlap (Thornton's law; the kernel starts it at yield; unread by every other law)
-        history = np.zeros(M - 1 if params.yield_overlap > 0.0 else 0)
-        grid_v = np.zeros((T, K))
-        pf = np.zeros(M - 1)
-        pft = np.zeros(M - 1)
-        grid_f = np.zeros(T)
-        info = np.zeros(INFO_SIZE)
-        grid_c = np.zeros((T, sensed.shape[0]))
-        row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed, pulse_end)
-        st = kernel(method, Model(m, c, params), row_run, State(x, v, history),
-                             Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
-        gather_forces(pf, pft, contacts, peak_f[r], peak_ft[r])
-        if wall:
-            wall_f[r] = pf[M - 2]
-            wall_ft[r] = pft[M - 2]
-        status[r] = st
-        n_steps[r] = np.int64(info[INFO_STEPS])
-        t_end[r] = info[INFO_T_END]
-        e0 = impulse_energy(m[0], v_init[r])
-        dissipated[r] = info[INFO_DISSIPATED]
-        if params.yield_overlap > 0.0:  # the elastic energy of a yielded contact depends on its history
-            e1 = plastic_energy(x, v, m, c, params, history) + info[INFO_DISSIPATED]
-        else:
-            e1 = final_energy(x, v, m, c, params, info) + info[INFO_DISSIPATED]
-        energy_error[r] = (e1 - e0) / e0
-        if st == SUCCESS:
-            cnt[tid] += 1
-            accumulate_fixed_point(grid_v, scale, acc1[tid], acc2[tid])
+        while True:
+            j = take(taken)
+            if j >= R:
+                break
+            r = order[j]
+            m = masses[r]
+            c = stiffness[r]
+            x = np.zeros(M)
+            v = np.zeros(M)
+            v[0] = v_init[r]  # the impulse on granule 1 (granchain.model.contacts.Impulse)
+            # each contact's largest overlap (Thornton's law; the kernel starts it at yield; unread by every other law)
+            history = np.zeros(M - 1 if params.yield_overlap > 0.0 else 0)
+            grid_v = np.zeros((T, K))
+            pf = np.zeros(M - 1)
+            pft = np.zeros(M - 1)
+            grid_f = np.zeros(T)
+            info = np.zeros(INFO_SIZE)
+            grid_c = np.zeros((T, sensed.shape[0]))
+            row_run = Run(obs, t_grid, t_limit[r], stop_at_exit, exit_margin, max_steps, peak_rtol, sensed, pulse_end)
+            st = kernel(method, Model(m, c, params), row_run, State(x, v, history),
+                        Outputs(peak_v[r], peak_t[r], grid_v, pf, pft, grid_f, info, grid_c))
+            gather_forces(pf, pft, contacts, peak_f[r], peak_ft[r])
             if wall:
-                accumulate_fixed_point_1d(grid_f, scale, accw[tid])
-            accumulate_aligned(t_grid, grid_v, peak_t[r], lags, scale, al1[tid], al2[tid])
+                wall_f[r] = pf[M - 2]
+                wall_ft[r] = pft[M - 2]
+            status[r] = st
+            n_steps[r] = np.int64(info[INFO_STEPS])
+            t_end[r] = info[INFO_T_END]
+            e0 = impulse_energy(m[0], v_init[r])
+            dissipated[r] = info[INFO_DISSIPATED]
+            if params.yield_overlap > 0.0:  # the elastic energy of a yielded contact depends on its history
+                e1 = plastic_energy(x, v, m, c, params, history) + info[INFO_DISSIPATED]
+            else:
+                e1 = final_energy(x, v, m, c, params, info) + info[INFO_DISSIPATED]
+            energy_error[r] = (e1 - e0) / e0
+            if st == SUCCESS:
+                cnt[tid] += 1
+                accumulate_fixed_point(grid_v, scale, acc1[tid], acc2[tid])
+                if wall:
+                    accumulate_fixed_point_1d(grid_f, scale, accw[tid])
+                accumulate_aligned(t_grid, grid_v, peak_t[r], lags, scale, al1[tid], al2[tid])
     for th in range(n_threads):
         n_valid[0] += cnt[th]
         for g in range(T):

@@ -38,9 +38,10 @@ Model = namedtuple("Model", ["masses", "stiffness", "params"])
 #: A batch of chains of one size for the ensemble kernel: ``masses`` (R, M), ``stiffness`` (R, M-1),
 #: ``initial_velocity`` (R,) (the impulse on granule 1 of each row), the :data:`Params` the rows share,
 #: and each row's time limit ``t_max`` (R,; a row's own, so that its result does not depend on the rows
-#: it is batched with: a precompressed chain runs to it), and ``order`` (R,), the rows in the order they are
-#: started (a permutation of 0..R-1, ``backends.longest_first``; no result depends on it).
-Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "params", "t_max", "order"])
+#: it is batched with: a precompressed chain runs to it); ``order`` (R,), the rows in the order they are
+#: started (a permutation of 0..R-1, ``backends.longest_first``; no result depends on it), and ``taken``
+#: (1,), how many of them the threads have taken (``queue.take``: from 0).
+Batch = namedtuple("Batch", ["masses", "stiffness", "initial_velocity", "params", "t_max", "order", "taken"])
 
 #: The integration method: ``kind`` (``KIND_*`` below) and its settings ``params`` (float64,
 #: laid out by the kind: see ``dispatch``).
