@@ -1,10 +1,11 @@
-"""Warp shuffles for Numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``), which has none.
+"""Warp shuffles and votes for Numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``), which has none.
 
-The GPU kernels exchange neighbours' positions and reduce the error norm with ``cuda.shfl_*_sync``; the
-simulator, which runs a kernel's threads as Python threads, lacks those intrinsics and the warp vote
-``cuda.ballot_sync``. :func:`install` adds them to its fake ``cuda`` module, each a block-wide exchange between two barriers (the kernels
-that shuffle run one warp per block, so block and warp coincide): slow, but the same code as on the GPU,
-so that machines without one (CI) test the shuffle path too. Nothing happens outside the simulator.
+The GPU kernels exchange neighbours' positions and reduce the error norm with ``cuda.shfl_*_sync``, and
+take the step's integer decisions with ``cuda.ballot_sync``; the simulator, which runs a kernel's threads
+as Python threads, lacks those intrinsics. :func:`install` adds them to its fake ``cuda`` module, each a
+block-wide exchange between two barriers (the kernels that shuffle run one warp per block, so block and
+warp coincide): slow, but the same code as on the GPU, so that machines without one (CI) test the
+shuffle path too. Nothing happens outside the simulator.
 """
 
 from __future__ import annotations
