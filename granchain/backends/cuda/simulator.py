@@ -13,28 +13,27 @@ from __future__ import annotations
 import threading
 
 
-def _exchange(module, value, source_lane):
-    """Every thread of the block offers ``value`` and receives the value of ``source_lane(lane)`` in its warp."""
+def _offer(module, value):
+    """Every thread of the block offers ``value`` between two barriers (one warp per block: block and warp
+    coincide); returns (what the threads offered, by thread id, this thread's warp's first id, its lane)."""
     thread = threading.current_thread()
     tid = thread.thread_id
-    lane = tid % 32
-    slots = module.__dict__.setdefault("_granchain_shuffle", {})
+    slots = module.__dict__.setdefault("_granchain_warp", {})
     thread.syncthreads()
     slots[tid] = value
     thread.syncthreads()
-    got = slots[tid - lane + source_lane(lane)]
-    return got
+    return slots, tid - tid % 32, tid % 32
+
+
+def _exchange(module, value, source_lane):
+    """Every thread of the block offers ``value`` and receives the value of ``source_lane(lane)`` in its warp."""
+    slots, base, lane = _offer(module, value)
+    return slots[base + source_lane(lane)]
 
 
 def _ballot(module, predicate):
     """The bits of the warp's lanes whose ``predicate`` holds (an unsigned 32-bit value, lane l at bit l)."""
-    thread = threading.current_thread()
-    tid = thread.thread_id
-    base = tid - tid % 32
-    slots = module.__dict__.setdefault("_granchain_ballot", {})
-    thread.syncthreads()
-    slots[tid] = bool(predicate)
-    thread.syncthreads()
+    slots, base, _ = _offer(module, bool(predicate))
     return sum(1 << lane for lane in range(32) if slots.get(base + lane, False))
 
 
