@@ -9,10 +9,12 @@ the same run:
 1. ``[1 gpu]``: the paper's decorated N = 26 set (``granchain.RandomDecorated(26)``, small radii
    U[0.01, 0.4]), 30,000 realisations, seed 0, on ``CudaBackend(threads_per_chain=L)`` for L = 32 (one
    warp per chain: warp shuffles with votes, the default; shuffle trees for the integer reductions;
-   128 registers; shared memory), 64 and 1 (one thread per chain: 3,000 realisations, scaled linearly,
-   said in the line); the integration time is the backend's own (``timings``: device time, synchronised, summed
+   capped at 168 registers, which ptxas reaches without spills, and at 128, with some
+   (``benchmarks/gpu_registers.py``); shared memory) and 1 (one thread per chain: 3,000 realisations,
+   scaled linearly, said in the line; L = 64 ran 3.5x slower than 32 on an H200 and is no longer timed); the integration time is the backend's own (``timings``: device time, synchronised, summed
    over the run's batches, the pulse-window pilot included), the wall time is ``run_ensemble``'s; then
-   the effective N = 26 set (L = 32). A small warm-up per layout comes first, its time printed apart
+   the effective N = 26 set (L = 32) with the GPU's default, RKN4, and with DP5 (their CPU default, asked
+   for), and the ratio of the two. A small warm-up per layout comes first, its time printed apart
    (``[1 compile]``: compilation and first launch).
 2. ``[2 peer]``: the naive peer, :func:`peer_kernel`: plain velocity Verlet at dt = 2.5e-4 (the largest
    step at which such a loop meets the accuracy contract, ``benchmarks/bench_verlet.py``), one thread
@@ -118,7 +120,7 @@ class Sizes:
     #: warp shuffles, the default at 32; "shared": shared memory and barriers), a register cap, and
     #: "butterfly" (the shuffle exchange's integer reductions by shuffle trees, not warp votes). The
     #: variants of the default layout first, so that a tight budget skips the slow ones.
-    layouts: tuple = ("32", "32/butterfly", "32/128", "32/shared", "64", "1")
+    layouts: tuple = ("32", "32/butterfly", "32/168", "32/128", "32/shared", "1")
     #: The layout the other parts compare with (the backend's default: one warp per chain, shuffles).
     reference: str = "32"
 
@@ -177,15 +179,15 @@ def gpu_backend(layout, stub: bool):
     return CudaBackend(threads_per_chain=L, exchange=exchange, max_registers=regs, votes=votes)
 
 
-def ensemble(run, realizations, seed, chains, *, backend=None, chunk_size=None, threads=None):
+def ensemble(run, realizations, seed, chains, *, backend=None, chunk_size=None, threads=None, integrator=None):
     """``granchain.run_ensemble`` of the run's family in memory, no progress, with the run's keywords;
     ``backend`` passed only where one is named (else the CPU default; the stub runs the CPU ensemble and
-    appends its wall time to its ``timings``)."""
+    appends its wall time to its ``timings``); ``integrator`` likewise (else the family's default)."""
     import granchain as gc
 
     family = run.family()
     kw = {"realizations": realizations, "seed": seed, "chains": chains, "out": None, "progress": False,
-          **dict(run.sizes.ensemble_kw)}
+          **dict(run.sizes.ensemble_kw), **({} if integrator is None else {"integrator": integrator})}
     if chunk_size is not None:
         kw["chunk_size"] = chunk_size
     if threads is not None:
@@ -358,12 +360,12 @@ def cpu_seconds() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
-def gpu_run(run: Run, backend, chains: str, R: int):
+def gpu_run(run: Run, backend, chains: str, R: int, integrator=None):
     """One timed GPU ensemble of R realisations (seed 0, one chunk): (Dataset, integration s, wall s, the
     backend's timings of the run: one per batch, the pulse-window pilot's first)."""
     n0 = len(backend.timings)
     t0 = time.perf_counter()
-    ds = ensemble(run, R, 0, chains, backend=backend, chunk_size=R)
+    ds = ensemble(run, R, 0, chains, backend=backend, chunk_size=R, integrator=integrator)
     wall = time.perf_counter() - t0
     new = backend.timings[n0:]
     return ds, sum(float(t["kernel_s"]) for t in new), wall, new
@@ -405,15 +407,18 @@ def compared(ok_a, ok_b, v_a, v_b):
 def part_gpu(run: Run) -> None:
     s = run.sizes
     N = s.n_large
-    for chains, layout in [("decorated", x) for x in s.layouts] + [("effective", s.reference)]:
+    # The effective chains twice: with the GPU's default, RKN4, and with their CPU default, DP5, which the GPU
+    # runs when asked (the line says which is faster there).
+    cases = [("decorated", x, None) for x in s.layouts] + [("effective", s.reference, None), ("effective", s.reference, "dp5")]
+    for chains, layout, method in cases:
         L = layout_key(layout)
-        label = f"{chains} N={N} L={L}"
+        label = f"{chains} N={N} L={L}" + (f" {method} (asked for)" if method else "")
         if not run.fits(f"1 gpu {chains} L={L}", 20.0):
             continue
         try:
             backend = gpu_backend(layout, run.stub)
             t0 = time.perf_counter()
-            ensemble(run, s.warmup, 0, chains, backend=backend, chunk_size=s.warmup)
+            ensemble(run, s.warmup, 0, chains, backend=backend, chunk_size=s.warmup, integrator=method)
             run.line("1 compile", f"{label}: warm-up of {s.warmup} realisations {time.perf_counter() - t0:.2f} s "
                                   f"(compilation and first launch){run.tag}")
             R = s.naive if L == 1 else s.realizations
@@ -421,7 +426,7 @@ def part_gpu(run: Run) -> None:
                 label += (f" ({backend.exchange} exchange{', warp votes' if backend.votes else ''}, "
                           f"max_registers {backend.max_registers})")
             scale = s.realizations / R
-            ds, kernel, wall, timings = gpu_run(run, backend, chains, R)
+            ds, kernel, wall, timings = gpu_run(run, backend, chains, R, integrator=method)
         except Exception as exc:  # noqa: BLE001 (one layout failing leaves the others)
             run.line(f"1 gpu {chains} L={L} error", f"{type(exc).__name__}: {exc}")
             traceback.print_exc(limit=4)
@@ -433,7 +438,13 @@ def part_gpu(run: Run) -> None:
                           f"{integrator_of(ds)}; batches {batches(timings)}), wall {wall * scale:.3f} s, "
                           f"{s.realizations / (wall * scale):,.0f} realisations/s; {ok:,} of {R:,} status 0; "
                           f"device {run.device}{run.tag}")
-        run.data[(chains, L)] = {"ds": ds, "kernel": kernel * scale, "wall": wall * scale}
+        run.data[(chains if method is None else f"{chains} {method}", L)] = {"ds": ds, "kernel": kernel * scale,
+                                                                              "wall": wall * scale}
+    ref = layout_key(s.reference)
+    if ("effective", ref) in run.data and ("effective dp5", ref) in run.data:
+        run.line("1 gpu", f"effective N={N} L={ref}: DP5 / RKN4 integration = "
+                          f"{run.data[('effective dp5', ref)]['kernel'] / run.data[('effective', ref)]['kernel']:.2f}x "
+                          f"(the GPU's default for them is RKN4){run.tag}")
     dec = {L: d for (kind, L), d in run.data.items() if kind == "decorated"}
     if dec:
         best = min(dec, key=lambda L: dec[L]["kernel"])
@@ -673,7 +684,7 @@ def main(argv=None) -> int:
     ap.add_argument("--layouts", default=None, help="part 1's layouts, comma-separated: threads per chain, then "
                                                     "optionally /shuffle or /shared, /REGS (a register cap) and "
                                                     "/butterfly (no warp votes); default "
-                                                    "32,32/butterfly,32/128,32/shared,64,1")
+                                                    "32,32/butterfly,32/168,32/128,32/shared,1")
     ap.add_argument("--budget", type=float, default=None, help="seconds the run may take; parts that no longer fit are "
                                                                "skipped (default 330 full, 170 smoke)")
     args = ap.parse_args(argv)

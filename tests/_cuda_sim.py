@@ -37,37 +37,55 @@ def outputs(R: int, K: int, C: int, T: int) -> dict:
             "sum_wall": np.zeros(T, np.int64), "n_valid": np.zeros(1, np.int64), "lags": None}
 
 
-def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str = "decorated", pulse_end=None) -> dict:
+def integrator_of(spec: str):
+    """The integrator named by ``spec``: a chain kind, for the ensembles' default ("decorated": windowed RKN4,
+    "effective": windowed DP5), "verlet:DT", or "rkn4:DT" / "dp5:DT" for a fixed step DT."""
+    import granchain as gc
     from granchain.ensembles.run import ensemble_integrator
+
+    name, _, dt = spec.partition(":")
+    if not dt:
+        return ensemble_integrator(name)
+    if name == "verlet":
+        return gc.Verlet(float(dt))
+    return {"rkn4": gc.RKN4, "dp5": gc.DP5}[name](fixed_step=float(dt))
+
+
+def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str = "decorated", pulse_end=None,
+              integrator: str = "decorated") -> dict:
+    """``integrator``: see :func:`integrator_of`."""
     from granchain.solve.integrators import RunControls
 
     masses, stiffness, n, v0, observed, contacts = batch(n_large, realizations, kind)
     t_grid = np.arange(0.0, t_end, 0.5)
     out = outputs(realizations, observed.size, contacts.size, t_grid.size)
-    backend.integrate_batch(ensemble_integrator("decorated"), masses, stiffness, n, v0, observed, contacts, t_grid=t_grid,
+    backend.integrate_batch(integrator_of(integrator), masses, stiffness, n, v0, observed, contacts, t_grid=t_grid,
                             t_max=200.0, controls=RunControls(), scale=2.0**30, out=out, pulse_end=pulse_end)
     return {k: a.tolist() for k, a in out.items() if k != "lags"}
 
 
 def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end: float, windows: bool,
-            repeat: bool = False, votes: bool = True) -> dict:
+            repeat: bool = False, votes: bool = True, kind: str = "decorated", integrator: str = "decorated") -> dict:
     """The CUDA backend and the CPU's Numba backend on the same batch: every per-realisation result and sum
     (``repeat``: the GPU run twice, ``"again"`` the second, with ``votes`` negated where the exchange is by
-    shuffles (the shuffle trees against the warp votes: the same results); else ``"again"`` is None)."""
+    shuffles (the shuffle trees against the warp votes: the same results); else ``"again"`` is None).
+    ``kind``: the chains; ``integrator``: whose default method (``run_batch``)."""
     from granchain.backends import get_backend
     from granchain.backends.cuda import CudaBackend
 
     ends = np.linspace(6.0, t_end, n_large) if windows else None  # averaged-pulse windows closing one by one
     gpu = CudaBackend(threads, exchange=exchange, votes=votes)
-    first = run_batch(gpu, n_large, realizations, t_end, pulse_end=ends)
+    kw = {"pulse_end": ends, "kind": kind, "integrator": integrator}
+    first = run_batch(gpu, n_large, realizations, t_end, **kw)
     other = CudaBackend(threads, exchange=exchange, votes=not votes) if exchange == "shuffle" else gpu
-    again = run_batch(other, n_large, realizations, t_end, pulse_end=ends) if repeat else None
-    cpu = run_batch(get_backend("numba"), n_large, realizations, t_end, pulse_end=ends)
+    again = run_batch(other, n_large, realizations, t_end, **kw) if repeat else None
+    cpu = run_batch(get_backend("numba"), n_large, realizations, t_end, **kw)
     return {"cuda": first, "again": again, "cpu": cpu}
 
 
-def versus_dop853(threads: int, wall: bool) -> dict:
-    """``simulate(..., backend="cuda")`` and DOP853 on a small decorated chain (with a wall or a free end)."""
+def versus_dop853(threads: int, wall: bool, method: str = "rkn4") -> dict:
+    """``simulate(..., backend="cuda")`` with ``method`` ("rkn4" or "dp5", at rtol 1e-10) and DOP853 on a small
+    decorated chain (with a wall or a free end)."""
     import granchain as gc
 
     chain = gc.decorated([0.3, 0.05, 0.2])
@@ -77,7 +95,8 @@ def versus_dop853(threads: int, wall: bool) -> dict:
     from granchain.backends.cuda import CudaBackend
 
     res = {}
-    for name, kw in (("cuda", {"integrator": gc.RKN4(1e-10, 1e-13), "backend": CudaBackend(threads)}),
+    method = {"rkn4": gc.RKN4, "dp5": gc.DP5}[method](1e-10, 1e-13)
+    for name, kw in (("cuda", {"integrator": method, "backend": CudaBackend(threads)}),
                      ("dop853", {"integrator": "dop853"})):
         r = gc.simulate(chain, t_grid=grid, **kw)
         res[name] = {"status": int(r.status), "peak_velocity": r.peak_velocity.tolist(), "peak_time": r.peak_time.tolist(),
@@ -120,9 +139,7 @@ def refusals() -> dict:
     backend = CudaBackend(1)
     chain = gc.decorated([0.3, 0.05])
     cases = {
-        "dp5": lambda: gc.simulate(chain, "dp5", backend=backend),
-        "verlet": lambda: gc.simulate(chain, gc.Verlet(1e-3), backend=backend),
-        "fixed step": lambda: gc.simulate(chain, gc.RKN4(fixed_step=1e-3), backend=backend),
+        "dop853": lambda: gc.simulate(chain, "dop853", backend=backend),
         "precompression": lambda: gc.simulate(chain.with_precompression(1e-3), "rkn4", backend=backend),
         "dissipation": lambda: gc.simulate(chain.with_dissipation(0.1), "dp5", backend=backend),
         "sensors": lambda: gc.simulate(gc.decorated([0.3, 0.05, 0.3]), "rkn4", backend=backend, sensors=[2],

@@ -245,6 +245,32 @@ def test_a_backend_with_fewer_methods_gets_rkn4_for_the_kinds_whose_default_it_l
     assert {i.name for i in named.chain_integrators.values()} == {"dp5"}
 
 
+class DefaultsToRkn(Fake):
+    """A backend with kernels for RKN4 and DP5 that defaults to RKN4 alone, as the GPU backend does."""
+
+    name = "defaults-to-rkn"
+    methods = ("rkn4", "dp5")
+    default_methods = ("rkn4",)
+
+
+class RunsBoth(Fake):
+    """The same without a default of its own: the methods it runs are the defaults it takes."""
+
+    name = "runs-both"
+    methods = ("rkn4", "dp5")
+
+
+def test_a_backend_that_runs_dp5_but_defaults_to_rkn4_gets_rkn4_unless_dp5_is_asked_for():
+    """What the GPU backend declares: the effective chains get RKN4 by default, and DP5 when it is named. The
+    negative control, a backend that runs both with no default of its own, keeps the CPU's DP5."""
+    assert {i.name for i in EnsembleSpec(FAMILY, realizations=4, backend=DefaultsToRkn()).chain_integrators.values()} \
+        == {"rkn4"}
+    named = EnsembleSpec(FAMILY, realizations=4, backend=DefaultsToRkn(), integrator="dp5")
+    assert {i.name for i in named.chain_integrators.values()} == {"dp5"}
+    both = EnsembleSpec(FAMILY, realizations=4, backend=RunsBoth())
+    assert {k: i.name for k, i in both.chain_integrators.items()} == {"decorated": "rkn4", "effective": "dp5"}
+
+
 def test_a_design_on_a_backend_without_its_default_method_uses_rkn4():
     from granchain.design import TaperedSpace
     from granchain.design.evaluate import BatchEvaluator
@@ -253,11 +279,13 @@ def test_a_design_on_a_backend_without_its_default_method_uses_rkn4():
     assert BatchEvaluator(space, "transmitted-energy").integrator.name == "dp5"  # negative control
     on = BatchEvaluator(space, "transmitted-energy", backend=RknOnly())
     assert on.integrator.name == "rkn4" and on.describe()["backend"] == "rkn-only"
+    assert BatchEvaluator(space, "transmitted-energy", backend=DefaultsToRkn()).integrator.name == "rkn4"
+    assert BatchEvaluator(space, "transmitted-energy", backend=RunsBoth()).integrator.name == "dp5"
 
 
 def test_pulse_backend_cpu_is_the_default_and_cuda_picks_rkn4(capsys):
     """``granchain pulse --backend cpu`` prints what the default prints; with ``--backend cuda`` and no
-    ``--integrator`` the integrator is RKN4 (the one method the GPU runs), not DP5, which it would refuse."""
+    ``--integrator`` the integrator is RKN4 (the GPU's default, the method measured there), not DP5."""
     import argparse
 
     from granchain.cli import main

@@ -23,6 +23,9 @@ PART_LINES = {
     "1 gpu L=32/shared": r"^\[1 gpu\] decorated N=4 L=32/shared \(shared exchange.*integration [\d.]+ s",
     "1 gpu L=1": r"^\[1 gpu\] decorated N=4 L=1 \(shared exchange.*integration [\d.]+ s",
     "1 gpu effective": r"^\[1 gpu\] effective N=4 L=32/shared \(shared exchange.*integration [\d.]+ s",
+    "1 gpu effective dp5": r"^\[1 gpu\] effective N=4 L=32/shared dp5 \(asked for\) \(shared exchange.*integration [\d.]+ s"
+                           r".*dp5 rtol",
+    "1 gpu dp5 / rkn4": r"^\[1 gpu\] effective N=4 L=32/shared: DP5 / RKN4 integration = [\d.]+x",
     "2 peer": r"^\[2 peer\] naive thread-per-chain velocity Verlet.*kernel [\d.]+ s.*granchain [\d.]+x faster",
     "2 accuracy": r"^\[2 accuracy\] peer vs the GPU backend .*largest relative peak-velocity difference",
     "3 cpu decorated": r"^\[3 cpu\] CPU decorated N=4, threads=\d+.*GPU L=32 / CPU-\d+: [\d.]+x",

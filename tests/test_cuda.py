@@ -74,6 +74,45 @@ def test_one_warp_per_chain_exchanges_by_shuffles():
     assert res["again"] == res["cuda"]
 
 
+def assert_same_steps(gpu: dict, cpu: dict, rtol: float) -> None:
+    """The same steps (status, step counts, energy errors: the step control reads no dense output) and peaks
+    within ``rtol``; the fixed-point sums of the grid velocities within ``rtol`` of their scale per term."""
+    for key in ("status", "n_steps", "n_valid"):
+        assert gpu[key] == cpu[key], key
+    for key in ("peak_velocity", "peak_force"):
+        np.testing.assert_allclose(gpu[key], cpu[key], rtol=rtol, atol=0, err_msg=key)
+    for key in ("peak_time", "peak_force_time"):
+        np.testing.assert_allclose(gpu[key], cpu[key], rtol=0, atol=rtol, err_msg=key)
+    np.testing.assert_allclose(gpu["energy_error"], cpu["energy_error"], rtol=0, atol=1e-12)
+    terms = cpu["n_valid"][0]
+    for key in ("sum_v", "sum_v2"):
+        assert np.max(np.abs(np.subtract(gpu[key], cpu[key]))) <= terms * (rtol * 2.0**30 + 1), key
+
+
+@pytest.mark.slow
+def test_dp5_takes_the_cpu_steps_across_threads():
+    """DP5 (the effective chains' method on the CPU), four threads per chain with two granules each, the
+    trailing window and averaged-pulse windows: the CPU's steps, bit for bit (a wrong tableau entry or PI
+    exponent changes the step counts), and its peaks within 1e-8, 1 % of the accuracy contract (the GPU reads
+    them on the quintic Hermite interpolant, the CPU on Shampine's extension: measured 3e-10); a second run
+    is bitwise the first."""
+    res = sim("compare", 4, "shared", 8, 1, 16.0, True, True, True, "effective", "effective")
+    assert_same_steps(res["cuda"], res["cpu"], rtol=1e-8)
+    assert res["again"] == res["cuda"]
+    assert res["cpu"]["n_valid"] == [1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator", ["verlet:0.01", "rkn4:0.01"], ids=["verlet", "rkn4 fixed step"])
+def test_fixed_steps_are_the_cpu_kernels(integrator):
+    """Velocity Verlet, and RKN4 with a fixed step, on effective chains: the CPU kernels' results to rounding
+    (Verlet's peaks and grid on its cubic Hermite interpolant, as the CPU reads them), twice the same bits."""
+    res = sim("compare", 1, "shared", 8, 2, 16.0, True, True, True, "effective", integrator)
+    assert_same_run(res["cuda"], res["cpu"])
+    assert res["again"] == res["cuda"]
+    assert res["cpu"]["n_valid"] == [2]
+
+
 def test_warp_votes_give_the_last_lanes_value():
     """The shuffle exchange's integer reductions (``device.warp_last``, ``warp_any``) against NumPy's maximum
     over the warp, on values that are -1 or grow with the lane: none set, all set, only lane 31 (the ballot's
@@ -94,11 +133,13 @@ def test_warp_votes_give_the_last_lanes_value():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("method", ["rkn4", "dp5"])
 @pytest.mark.parametrize("wall", [False, True], ids=["free end", "wall"])
-def test_single_chain_against_dop853(wall):
-    """``simulate(backend=...)`` on the GPU backend against SciPy's DOP853 (an independent integrator):
-    peaks, grid velocities and (with a wall) the wall's peak force within the accuracy contract."""
-    res = sim("versus_dop853", 1, wall)
+def test_single_chain_against_dop853(wall, method):
+    """``simulate(backend=...)`` on the GPU backend, with each method it has a kernel for, against SciPy's
+    DOP853 (an independent integrator): peaks, grid velocities and (with a wall) the wall's peak force
+    within the accuracy contract."""
+    res = sim("versus_dop853", 1, wall, method)
     gpu, ref = res["cuda"], res["dop853"]
     assert gpu["status"] == ref["status"] == 0
     np.testing.assert_allclose(gpu["peak_velocity"], ref["peak_velocity"], rtol=1e-6)

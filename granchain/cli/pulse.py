@@ -70,7 +70,7 @@ def add_parser(subparsers) -> None:
     # the lists of integrators and of the ones each setting applies to come from the registry
     p.add_argument("--integrator", default=None, metavar="{" + ",".join(sorted(INTEGRATORS)) + "}",
                    help=f"one of {', '.join(f'{name} ({INTEGRATOR_NOTES[name]})' if name in INTEGRATOR_NOTES else name for name in sorted(INTEGRATORS))} "
-                        "(default dp5; rkn4 with --backend cuda, the one method the GPU runs)")
+                        "(default dp5; rkn4 with --backend cuda, the GPU's default)")
     p.add_argument("--rtol", type=float, help=f"relative tolerance ({', '.join(taking('rtol'))})")
     p.add_argument("--atol", type=float, help=f"absolute tolerance ({', '.join(taking('atol'))})")
     p.add_argument("--dt", type=float, help=f"time step ({', '.join(taking('dt'))})")

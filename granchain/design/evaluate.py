@@ -192,9 +192,9 @@ class BatchEvaluator:
         if contact is not None and self.integrator.needs_conservative_forces and not contact.conservative:
             raise ValueError(f"{self.integrator.name} integrates x'' = f(x) and needs forces that depend on positions only; "
                              f"the contact law {contact!r} depends on velocities: use DP5 (the default for it) or DOP853")
-        methods = getattr(_backend.resolve(self.backend), "methods", None)
+        methods = _backend.default_methods(_backend.resolve(self.backend))
         if integrator is None and methods is not None and self.integrator.name not in methods and contact is None:
-            # a backend without a kernel for the default (the GPU runs RKN4 alone): the decorated chains' method,
+            # a backend whose defaults exclude it (the GPU's is RKN4, measured there): the decorated chains' method,
             # every granule to the end, valid for every elastic chain (recorded in describe())
             self.integrator = _defaults.default_integrator(_defaults.LIGHT_GRANULES, windowed=False)
         self.statistic = _check_statistic(statistic)

@@ -76,6 +76,15 @@ def runs_on_cpu(backend) -> bool:
     return backend is None or name_of(backend) in CPU_BACKENDS
 
 
+def default_methods(backend) -> tuple | None:
+    """The methods (``Integrator.name``) a caller's default integrator may be on ``backend`` (a resolved
+    ``Backend`` or None): its ``default_methods`` where it declares them (the GPU: the one measured on it),
+    else the ``methods`` it has kernels for; None: any (the CPU backends)."""
+    if backend is None:
+        return None
+    return getattr(backend, "default_methods", None) or getattr(backend, "methods", None)
+
+
 def default_chunk_size(backend) -> int:
     """Realisations per chunk the backend asks for (``Backend.default_chunk_size``: a GPU needs about
     10,000 chains per launch to fill its cores), :data:`CPU_CHUNK_SIZE` for the CPU."""

@@ -127,9 +127,10 @@ class EnsembleSpec:
             windowed = self.pulse_window == AUTO
             per_chain = {c: (get_integrator(given) if given is not None else family_integrator(self.family, c, windowed=windowed))
                          for c in self.chains}
-            # A backend that runs fewer methods (the GPU: RKN4 alone) gets the light-granule chains' default,
-            # RKN4, for the kinds whose default it has no kernel for: valid for every elastic chain.
-            methods = getattr(_backend.resolve(_backend.checked(self.backend)), "methods", None)
+            # A backend that defaults to fewer methods (the GPU: RKN4, the one measured there) gets the
+            # light-granule chains' default, RKN4, for the kinds whose default it does not: valid for every
+            # elastic chain.
+            methods = _backend.default_methods(_backend.resolve(_backend.checked(self.backend)))
             if given is None and methods is not None:
                 fallback = default_integrator(LIGHT_GRANULES, conservative=self.family.model.conservative, windowed=windowed)
                 per_chain = {c: (i if i.name in methods else fallback) for c, i in per_chain.items()}

@@ -1,14 +1,16 @@
-"""The CUDA backend: the ensembles' adaptive RKN4 on an NVIDIA GPU (Numba's CUDA target).
+"""The CUDA backend: the ensembles' RKN4, DP5 and Verlet on an NVIDIA GPU (Numba's CUDA target).
 
 ``CudaBackend`` runs batches of chains (``run_ensemble(..., backend="cuda")``, the design evaluator,
 validity maps) and single chains (``simulate(..., backend="cuda")``) with the kernels of
 :mod:`granchain.backends.cuda.kernel` (its docstring says why a chain is a block of threads, not one
-thread). It runs what the CPU kernels run for elastic chains: RKN4 with the same step control, peaks,
-grid samples and stop rule, so its per-realisation results agree with the CPU backend's within the
-accuracy contract (not bit for bit: the GPU's fused multiply-adds round differently), and its sums of
-the averaged pulse are fixed-point integers added in a fixed order, so a run repeated gives the same
-bits. What it has no kernel for (DP5 and Verlet, precompression, damping, the aligned pulse, force
-sensors on the grid) is refused with an error that names the CPU backend.
+thread). It runs what the CPU kernels run for elastic chains: RKN4 and DP5 with the same step control
+(or a fixed step), velocity Verlet, the same peaks, grid samples and stop rule, so its per-realisation
+results agree with the CPU backend's within the accuracy contract (not bit for bit: the GPU's fused
+multiply-adds round differently, and DP5's peaks are read on another interpolant, ``kernel.make_kernel``),
+and its sums of the averaged pulse are fixed-point integers added in a fixed order, so a run repeated
+gives the same bits. What it has no kernel for (precompression, damping and every contact law but the
+elastic power law, the aligned pulse, force sensors on the grid) is refused with an error that names the
+CPU backend.
 
 Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, which installs
 ``numba-cuda``). Under ``NUMBA_ENABLE_CUDASIM=1`` the same kernels run in Numba's simulator on a CPU
@@ -52,7 +54,7 @@ def available() -> tuple[bool, str]:
 
 
 class CudaBackend(Backend):
-    """RKN4 for elastic chains on an NVIDIA GPU; ``threads_per_chain`` chooses the layout (see
+    """RKN4, DP5 and Verlet for elastic chains on an NVIDIA GPU; ``threads_per_chain`` chooses the layout (see
     :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp shuffles, the
     default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's integer
     reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
@@ -61,9 +63,12 @@ class CudaBackend(Backend):
 
     name = "cuda"
     law_forms = ("power-law",)
-    #: The integrators it has kernels for (``Integrator.name``). The ensembles give every elastic chain kind
-    #: RKN4 on it (the decorated chains' CPU default; the others' is DP5).
-    methods = ("rkn4",)
+    #: The integrators it has kernels for (``Integrator.name``).
+    methods = ("rkn4", "dp5", "verlet")
+    #: The methods a caller's default may pick on it: RKN4 alone, the one measured on a GPU
+    #: (benchmarks/bench_gpu.py). The ensembles and the design evaluator give every elastic chain kind RKN4
+    #: here (the decorated chains' CPU default; the others' is DP5, which runs when it is asked for).
+    default_methods = ("rkn4",)
     #: Realisations per store chunk (one launch each): a launch needs thousands of chains to fill the GPU
     #: (one block per chain, up to 32 blocks on each of an H100's 132 multiprocessors) and lasts until its
     #: slowest chain ends, so the paper's 30,000 go in one.
@@ -95,16 +100,15 @@ class CudaBackend(Backend):
 
     # ------------------------------------------------------------------ what it runs
     def check(self, integrator, chain) -> None:
-        """RKN4 alone, adaptive, on an elastic (power-law), unloaded chain at rest ahead of the pulse; then
+        """RKN4, DP5 or Verlet on an elastic (power-law), unloaded chain at rest ahead of the pulse; then
         :meth:`Backend.check`. Each refusal names the CPU backend, which runs all of these."""
         cpu = "; use the CPU backend (backend='cpu')"
         if type(chain.contact).__dict__.get("form") not in self.law_forms:
             raise ValueError(f"the cuda backend has no kernel for the contact law {chain.contact!r} (elastic power-law "
                              f"contacts only){cpu}")
         if integrator.name not in self.methods:
-            raise ValueError(f"the cuda backend runs RKN4 (granchain.RKN4) alone, not {integrator.name}{cpu}")
-        if integrator.fixed_step:
-            raise ValueError(f"the cuda backend runs RKN4 with step control, not with a fixed step{cpu}")
+            raise ValueError(f"the cuda backend runs RKN4, DP5 and Verlet (granchain.RKN4, granchain.DP5, "
+                             f"granchain.Verlet), not {integrator.name}{cpu}")
         if chain.precompression.applied:
             raise ValueError(f"the cuda backend has no kernel for precompressed chains{cpu}")
         if not chain.initial.rest_ahead:
@@ -112,15 +116,16 @@ class CudaBackend(Backend):
                              f"{chain.initial!r} does not{cpu}")
         super().check(integrator, chain)
 
-    def _kernel(self, M: int):
+    def _kernel(self, M: int, method: str, fixed: bool):
         from .kernel import make_kernel
 
         L = self.threads_per_chain
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
-        if (L, G) not in self._kernels:
-            self._kernels[(L, G)] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes)
-        return L, G, self._kernels[(L, G)]
+        key = (L, G, method, fixed)
+        if key not in self._kernels:
+            self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed)
+        return L, G, self._kernels[key]
 
     # ------------------------------------------------------------------ runs
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
@@ -197,10 +202,16 @@ class CudaBackend(Backend):
         obs_of[observed] = np.arange(K)
         ends = np.full(K, np.inf) if pulse_end is None else np.asarray(pulse_end, dtype=float)
         prm = np.zeros(P_SIZE)
-        prm[:] = (ran.rtol, ran.atol, ran.first_step, ran.relaxed_lag or 0, ran.relaxed_factor, ran.window_lag or 0,
-                  controls.exit_margin, controls.peak_rtol, controls.max_steps, float(chain.n), float(bool(stop_at_exit)),
-                  float(chain.boundary.wall), float(t_grid[-1]) if T else 0.0, float(pulse_end is not None))
-        L, G, kernel = self._kernel(M)
+        if ran.name == "verlet":  # a fixed step, no tolerances, no goal-oriented zones, no averaged-pulse windows
+            fixed, steps, pulse_end = True, (0.0, 0.0, ran.dt, 0, 1.0, 0), None  # (as the CPU's Verlet: kernels.verlet)
+        else:
+            fixed = ran.fixed_step is not None
+            steps = (ran.rtol, ran.atol, ran.fixed_step if fixed else ran.first_step, ran.relaxed_lag or 0,
+                     ran.relaxed_factor, ran.window_lag or 0)
+        prm[:] = (*steps, controls.exit_margin, controls.peak_rtol, controls.max_steps, float(chain.n),
+                  float(bool(stop_at_exit)), float(chain.boundary.wall), float(t_grid[-1]) if T else 0.0,
+                  float(pulse_end is not None))
+        L, G, kernel = self._kernel(M, ran.name, fixed)
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.

@@ -13,6 +13,7 @@ import math
 from numba import cuda, int32, int64
 
 from ..kernels import dense as _dense
+from ..kernels import verlet as _verlet
 
 FULL_MASK = 0xFFFFFFFF  # every lane of a warp (the shuffle exchange)
 
@@ -126,6 +127,9 @@ def falls(f0, f1):
 
 #: ``kernels.dense.hermite_max_estimate`` (plain arithmetic): the CPU's own function compiled for the GPU.
 hermite_max_estimate = cuda.jit(device=True)(_dense.hermite_max_estimate.py_func)
+#: ``kernels.verlet.hermite``, the cubic Hermite interpolant through (y, y') at a step's ends that Verlet's
+#: peaks and grid samples are read on: the CPU's own function compiled for the GPU.
+hermite3 = cuda.jit(device=True)(_verlet.hermite.py_func)
 
 
 @cuda.jit(device=True)

@@ -1,4 +1,5 @@
-"""The CUDA kernels: adaptive RKN4(3) over a batch of chains, a group of ``L`` threads per chain.
+"""The CUDA kernels: RKN4(3), DP5(4) or velocity Verlet over a batch of chains, a group of ``L`` threads per
+chain.
 
 Layout (why it is not one thread per chain). An adaptive method takes as many steps as its chain
 needs, and the paper's decorated chains differ in that by up to 50x (the tiniest decorating granules
@@ -15,8 +16,9 @@ and, on the few steps that hold a peak or a grid time, the dense output of every
 shared memory. ``L = 1`` compiles the same code as one thread per chain (its exchange arrays in local
 memory, no barriers), the layout it is measured against (``benchmarks/bench_gpu.py``).
 
-The method, step control and records are those of the CPU kernels (``granchain.backends.kernels``:
-``rkn4`` for the Runge-Kutta-Nystrom pair of Dormand, El-Mikkawy & Prince, ``rkloop`` for the PI
+The methods, step control and records are those of the CPU kernels (``granchain.backends.kernels``:
+``rkn4`` for the Runge-Kutta-Nystrom pair of Dormand, El-Mikkawy & Prince, ``dp5`` for Dormand-Prince,
+``verlet`` for velocity Verlet with its own peak rules (see :func:`make_kernel`), ``rkloop`` for the PI
 controller, the max-norm error with its relaxed zone and the stop rule, ``dense`` for the peaks
 located as roots on the quintic Hermite dense output), written once more for the GPU because a GPU
 kernel cannot call the CPU's: compiled by NVVM, whose fused multiply-adds round differently, the
@@ -64,7 +66,8 @@ from ..kernels.rkn4 import (
     P2,
     P3,
 )
-from ..kernels.schemes import RKN4
+from ..kernels import dp5 as _dp5
+from ..kernels.schemes import DP5, RKN4
 from ..kernels.stop import RATTLER_MASS_RATIO
 from ..kernels.window import CUT_FORCE
 from .device import (
@@ -74,6 +77,7 @@ from .device import (
     dense_v,
     dense_x,
     falls,
+    hermite3,
     hermite_max_estimate,
     root,
     warp_any,
@@ -82,6 +86,18 @@ from .device import (
 
 #: The PI controller's exponent of RKN4(3)'s error estimate (the CPU step loop's, ``rkloop.pi_exponent``).
 ALPHA_RKN4 = pi_exponent(RKN4)
+#: The same for DP5(4).
+ALPHA_DP5 = pi_exponent(DP5)
+#: Dormand-Prince 5(4)'s tableau (``kernels.dp5``, whose names RKN4's share: renamed D* here).
+D21 = _dp5.A21
+D31, D32 = _dp5.A31, _dp5.A32
+D41, D42, D43 = _dp5.A41, _dp5.A42, _dp5.A43
+D51, D52, D53, D54 = _dp5.A51, _dp5.A52, _dp5.A53, _dp5.A54
+D61, D62, D63, D64, D65 = _dp5.A61, _dp5.A62, _dp5.A63, _dp5.A64, _dp5.A65
+DB1, DB3, DB4, DB5, DB6 = _dp5.B1, _dp5.B3, _dp5.B4, _dp5.B5, _dp5.B6
+DE1, DE3, DE4, DE5, DE6, DE7 = _dp5.E1, _dp5.E3, _dp5.E4, _dp5.E5, _dp5.E6, _dp5.E7
+#: The methods :func:`make_kernel` compiles (``Integrator.name``).
+METHODS = ("rkn4", "dp5", "verlet")
 
 
 #: Layout of the float settings array ``prm`` the kernel reads.
@@ -89,11 +105,30 @@ ALPHA_RKN4 = pi_exponent(RKN4)
  P_STOP_AT_EXIT, P_WALL, P_T_NEEDED, P_WINDOWS, P_SIZE) = range(15)
 
 
-def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False, votes: bool = True):
-    """The RKN4 batch kernel for ``L`` threads per chain and ``G`` granules per thread (chains of up to
-    ``L * G`` granules). ``L`` and ``G`` are constants of its code: Numba prunes the barriers of
-    ``L = 1`` and sizes the per-thread arrays by ``G``. ``max_registers`` caps the registers per thread
-    (more resident chains per multiprocessor, against spills: measured in benchmarks/bench_gpu.py).
+def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False, votes: bool = True,
+                method: str = "rkn4", fixed: bool = False):
+    """The batch kernel of ``method`` ("rkn4", "dp5" or "verlet") for ``L`` threads per chain and ``G``
+    granules per thread (chains of up to ``L * G`` granules). ``L``, ``G``, the method and ``fixed`` are
+    constants of its code: Numba prunes the barriers of ``L = 1`` and the other methods' code, and sizes
+    the per-thread arrays by ``G``. ``max_registers`` caps the registers per thread (more resident chains
+    per multiprocessor, against spills: measured in benchmarks/bench_gpu.py).
+
+    ``fixed``: RKN4 or DP5 with a fixed step (the first step, ``P_FIRST``): no error estimate, every step
+    accepted, as the CPU's ``fixed_step`` (``rkloop``); a state that is not finite ends the run (NONFINITE).
+
+    ``method`` "dp5": Dormand-Prince 5(4) (``kernels.dp5``: six force evaluations a step, the seventh
+    stage the next step's first) in the same step loop, with its own PI exponent; its error norm is the
+    CPU's. Its peaks and grid samples are read on the quintic Hermite interpolant through (x, v, a) at the
+    step's ends, as RKN4's are, not on Shampine's continuous extension the CPU uses: Hermite needs only
+    the step's end states of a granule's neighbours (three shared arrays, not fourteen stage arrays) and is
+    of higher order in the positions (O(h^6) against the extension's O(h^5); velocities O(h^5) in both); the
+    two locate a peak within the step's error, so GPU and CPU agree within the accuracy contract, with the
+    same steps (the step control reads no dense output).
+
+    ``method`` "verlet": velocity Verlet with the fixed step ``P_FIRST`` (``kernels.verlet``): one force
+    evaluation a step, its peaks at the zero of the linearly interpolated acceleration (or relative
+    velocity) and its grid samples on the cubic Hermite interpolant of the step's ends, as the CPU reads
+    them, to rounding; no goal-oriented zones (the host passes no lags and no averaged-pulse windows).
 
     Barriers: a group exchanges the stage positions through two alternating shared arrays, so that one
     barrier per force evaluation suffices (a thread can only overwrite an array after every thread has
@@ -111,6 +146,13 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     maximum is the value of the last lane that has one: one ballot and one 32-bit shuffle, where a
     butterfly of 64-bit maxima takes five shuffle rounds of two instructions each. Same results bit for
     bit (integers); ``votes=False`` keeps the butterflies for the benchmark's comparison."""
+    if method not in METHODS:
+        raise ValueError(f"the cuda kernels integrate with {METHODS}, not {method!r}")
+    DP = method == "dp5"
+    VERLET = method == "verlet"
+    FIXED = bool(fixed) or VERLET
+    ALPHA = ALPHA_DP5 if DP else ALPHA_RKN4
+    GD = G if DP else 1  # DP5's stage arrays (one element, unused, in RKN4's kernel)
     MMAX = L * G
     GROUP = L > 1
     SHUFFLE = bool(shuffle)
@@ -292,6 +334,15 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
         c_left = cuda.local.array(G, float64)
         c_right = cuda.local.array(G, float64)
         q_of = cuda.local.array(G, int64)
+        # DP5's stages 2..6: velocities u1..u5, accelerations k1, k2 (above) and k3..k5.
+        u1 = cuda.local.array(GD, float64)
+        u2 = cuda.local.array(GD, float64)
+        u3 = cuda.local.array(GD, float64)
+        u4 = cuda.local.array(GD, float64)
+        u5 = cuda.local.array(GD, float64)
+        k3 = cuda.local.array(GD, float64)
+        k4 = cuda.local.array(GD, float64)
+        k5 = cuda.local.array(GD, float64)
 
         rtol = prm[P_RTOL]
         atol = prm[P_ATOL]
@@ -353,6 +404,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
 
         t = 0.0
         h = prm[P_FIRST]
+        h_fixed = h
         err_old = 1e-4
         exit_since = -1.0
         n_acc = int64(0)
@@ -374,32 +426,77 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 h = t_stop - t
                 last = True
             h2 = h * h
-            # Stages 1..3 (``kernels.rkn4.stages``); a3 is the force per mass at the new position.
-            for s in range(G):
-                xs[s] = x[s] + h * (C1 * v[s]) + h2 * (A10 * a0[s])
-            forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k1)
-            for s in range(G):
-                xs[s] = x[s] + h * (C2 * v[s]) + h2 * (A20 * a0[s] + A21 * k1[s])
-            forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k2)
-            for s in range(G):
-                xs[s] = x[s] + h * v[s] + h2 * (B0 * a0[s] + B1 * k1[s] + B2 * k2[s])
-            forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, a3)
-            # The new velocities and this thread's share of the error norm (``kernels.rkn4.error_ratios``).
+            if VERLET:
+                # ``kernels.verlet``: x' = x + h v + h^2 a / 2, v' = v + h (a + a') / 2.
+                for s in range(G):
+                    xs[s] = x[s] + (h * v[s] + 0.5 * h * h * a0[s])
+                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, a3)
+                for s in range(G):
+                    vs[s] = v[s] + 0.5 * h * (a0[s] + a3[s])
+            elif DP:
+                # Stages 2..7 (``kernels.dp5.stages``, the same arithmetic in the same order): the 7th is the
+                # new state, xs, vs, and a3 its force per mass.
+                for s in range(G):
+                    xs[s] = x[s] + h * (D21 * v[s])
+                    u1[s] = v[s] + h * (D21 * a0[s])
+                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k1)
+                for s in range(G):
+                    xs[s] = x[s] + h * (D31 * v[s] + D32 * u1[s])
+                    u2[s] = v[s] + h * (D31 * a0[s] + D32 * k1[s])
+                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k2)
+                for s in range(G):
+                    xs[s] = x[s] + h * (D41 * v[s] + D42 * u1[s] + D43 * u2[s])
+                    u3[s] = v[s] + h * (D41 * a0[s] + D42 * k1[s] + D43 * k2[s])
+                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k3)
+                for s in range(G):
+                    xs[s] = x[s] + h * (D51 * v[s] + D52 * u1[s] + D53 * u2[s] + D54 * u3[s])
+                    u4[s] = v[s] + h * (D51 * a0[s] + D52 * k1[s] + D53 * k2[s] + D54 * k3[s])
+                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k4)
+                for s in range(G):
+                    xs[s] = x[s] + h * (D61 * v[s] + D62 * u1[s] + D63 * u2[s] + D64 * u3[s] + D65 * u4[s])
+                    u5[s] = v[s] + h * (D61 * a0[s] + D62 * k1[s] + D63 * k2[s] + D64 * k3[s] + D65 * k4[s])
+                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k5)
+                for s in range(G):
+                    xs[s] = x[s] + h * (DB1 * v[s] + DB3 * u2[s] + DB4 * u3[s] + DB5 * u4[s] + DB6 * u5[s])
+                    vs[s] = v[s] + h * (DB1 * a0[s] + DB3 * k2[s] + DB4 * k3[s] + DB5 * k4[s] + DB6 * k5[s])
+                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, a3)
+            else:
+                # Stages 1..3 (``kernels.rkn4.stages``); a3 is the force per mass at the new position.
+                for s in range(G):
+                    xs[s] = x[s] + h * (C1 * v[s]) + h2 * (A10 * a0[s])
+                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k1)
+                for s in range(G):
+                    xs[s] = x[s] + h * (C2 * v[s]) + h2 * (A20 * a0[s] + A21 * k1[s])
+                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k2)
+                for s in range(G):
+                    xs[s] = x[s] + h * v[s] + h2 * (B0 * a0[s] + B1 * k1[s] + B2 * k2[s])
+                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, a3)
+            # The new velocities (RKN4) and this thread's share of the error norm (``error_ratios`` of
+            # ``kernels.rkn4`` or ``kernels.dp5``).
             e = 0.0
             for s in range(G):
                 i = own + s
-                vs[s] = v[s] + h * (P0 * a0[s] + P1 * k1[s] + P2 * k2[s] + P3 * a3[s])
+                if not DP and not VERLET:
+                    vs[s] = v[s] + h * (P0 * a0[s] + P1 * k1[s] + P2 * k2[s] + P3 * a3[s])
                 if i < M:
-                    w = relax_factor if i < relaxed else 1.0
-                    ex = h2 * (EB0 * a0[s] + EB1 * k1[s] + EB2 * k2[s] + EB3 * a3[s])
-                    ev = h * (EP0 * a0[s] + EP1 * k1[s] + EP2 * k2[s] + EP3 * a3[s])
-                    rx = abs(ex) / ((atol + rtol * max(abs(x[s]), abs(xs[s]))) * w)
-                    rv = abs(ev) / ((atol + rtol * max(abs(v[s]), abs(vs[s]))) * w)
-                    if not (rx <= 1e300):  # inf or NaN wins (a max would drop a NaN)
-                        rx = math.inf
-                    if not (rv <= 1e300):
-                        rv = math.inf
-                    e = max(e, max(rx, rv))
+                    if FIXED:  # no error estimate: the norm is 0, or inf where the new state is not finite
+                        if not (abs(xs[s]) < math.inf and abs(vs[s]) < math.inf):
+                            e = math.inf
+                    else:
+                        w = relax_factor if i < relaxed else 1.0
+                        if DP:
+                            ex = h * (DE1 * v[s] + DE3 * u2[s] + DE4 * u3[s] + DE5 * u4[s] + DE6 * u5[s] + DE7 * vs[s])
+                            ev = h * (DE1 * a0[s] + DE3 * k2[s] + DE4 * k3[s] + DE5 * k4[s] + DE6 * k5[s] + DE7 * a3[s])
+                        else:
+                            ex = h2 * (EB0 * a0[s] + EB1 * k1[s] + EB2 * k2[s] + EB3 * a3[s])
+                            ev = h * (EP0 * a0[s] + EP1 * k1[s] + EP2 * k2[s] + EP3 * a3[s])
+                        rx = abs(ex) / ((atol + rtol * max(abs(x[s]), abs(xs[s]))) * w)
+                        rv = abs(ev) / ((atol + rtol * max(abs(v[s]), abs(vs[s]))) * w)
+                        if not (rx <= 1e300):  # inf or NaN wins (a max would drop a NaN)
+                            rx = math.inf
+                        if not (rv <= 1e300):
+                            rv = math.inf
+                        e = max(e, max(rx, rv))
                     if not SHUFFLE:
                         if i == M - 2:
                             tail[0] = xs[s]
@@ -434,7 +531,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 break
             if err > 1.0:
                 n_rej += 1
-                h *= max(MIN_FACTOR, SAFETY * err ** -ALPHA_RKN4)
+                h *= max(MIN_FACTOR, SAFETY * err ** -ALPHA)
                 if h < 1e-14 * max(1.0, t):
                     status = STEP_UNDERFLOW
                 continue
@@ -492,9 +589,13 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                     i = own + s
                     q = q_of[s]
                     if i >= lo and i < M and q >= 0 and falls(a0[s], a3[s]):
-                        theta = root(0, i, M, a0[s], a3[s], hx0, hv0, ha0, hx1, hv1, ha1, h,
-                                     c_left[s] if i > lo else 0.0, c_right[s], inv_m[s], n)
-                        vpk = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                        if VERLET:  # at the zero of the linearly interpolated acceleration (``kernels.verlet``)
+                            theta = a0[s] / (a0[s] - a3[s])
+                            vpk = hermite3(v[s], a0[s], vs[s], a3[s], h, theta)
+                        else:
+                            theta = root(0, i, M, a0[s], a3[s], hx0, hv0, ha0, hx1, hv1, ha1, h,
+                                         c_left[s] if i > lo else 0.0, c_right[s], inv_m[s], n)
+                            vpk = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                         if vpk > peak_v[r, q] + peak_rtol * abs(peak_v[r, q]):
                             peak_v[r, q] = vpk
                             peak_t[r, q] = t + theta * h
@@ -502,7 +603,15 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                     if i >= lo and i < M - 1:
                         w0 = hv0[i] - hv0[i + 1]
                         w1 = hv1[i] - hv1[i + 1]
-                        if falls(w0, w1):
+                        if VERLET and falls(w0, w1):  # at the zero of the linearly interpolated relative velocity
+                            theta = w0 / (w0 - w1)
+                            dp = (hermite3(hx0[i], hv0[i], hx1[i], hv1[i], h, theta)
+                                  - hermite3(hx0[i + 1], hv0[i + 1], hx1[i + 1], hv1[i + 1], h, theta))
+                            fp = contact_force(dp, c_right[s], n)
+                            if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
+                                peak_f[r, i] = fp
+                                peak_ft[r, i] = t + theta * h
+                        elif falls(w0, w1):
                             d0 = hx0[i] - hx0[i + 1]
                             d1 = hx1[i] - hx1[i + 1]
                             if hermite_max_estimate(d0, w0, d1, w1, h) >= SCREEN * peak_d[r, i]:
@@ -524,12 +633,19 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                 grid_v[r, g, q] = 0.0
                             elif i < lo:  # behind the trailing window: the velocity it left with
                                 grid_v[r, g, q] = v[s]
+                            elif VERLET:
+                                grid_v[r, g, q] = hermite3(hv0[i], ha0[i], hv1[i], ha1[i], h, theta)
                             else:
                                 grid_v[r, g, q] = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                         if wall and i == M - 2:
-                            grid_f[r, g] = contact_force(
-                                dense_x(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), c_right[s], n)
+                            if VERLET:
+                                grid_f[r, g] = contact_force(
+                                    hermite3(hx0[M - 2], hv0[M - 2], hx1[M - 2], hv1[M - 2], h, theta)
+                                    - hermite3(hx0[M - 1], hv0[M - 1], hx1[M - 1], hv1[M - 1], h, theta), c_right[s], n)
+                            else:
+                                grid_f[r, g] = contact_force(
+                                    dense_x(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                                    - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), c_right[s], n)
                     g += 1
                 before = front
                 front = max(front, group_last(found, red_q, lane))
@@ -592,10 +708,13 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 status = T_MAX if stop_at_exit else SUCCESS
             if status >= 0:
                 break
-            fac = SAFETY * max(err, 1e-10) ** -ALPHA_RKN4 * err_old ** BETA
-            fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
-            h *= fac
-            err_old = max(err, 1e-4)
+            if VERLET:
+                h = h_fixed  # (a step shortened to land on the end is not kept: ``kernels.verlet``)
+            elif not FIXED:
+                fac = SAFETY * max(err, 1e-10) ** -ALPHA * err_old ** BETA
+                fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+                h *= fac
+                err_old = max(err, 1e-4)
 
         # The end of the run: the last instant is a peak candidate where a granule still speeds up, or a
         # contact still compresses (``kernels.peaks.final_peaks``, ``final_force_peaks``).
