@@ -71,9 +71,13 @@ def parse_ptxas(text: str) -> dict:
 
 
 def ptx_digest(ptx: str) -> str:
-    """A digest of the PTX's code alone: comments (the compiler's build) and mangled symbols (which carry
-    closure addresses) removed."""
-    body = re.sub(r"^//.*$", "", ptx, flags=re.M)
+    """A digest of the PTX's code alone: comments (the compiler's build), the declarations of Numba's
+    environment words (one per device function, which no instruction reads, so that moving code into a
+    device function of its own changes nothing) and mangled symbols (which carry closure addresses and
+    module names) removed."""
+    lines = [line for line in ptx.splitlines()
+             if line.strip() and not line.startswith("//") and not (line.startswith(".common") and "NumbaEnv" in line)]
+    body = "\n".join(lines)
     body = re.sub(r"_ZN[0-9A-Za-z_]+", "SYM", body)
     return hashlib.sha256(body.encode()).hexdigest()[:12]
 

@@ -29,47 +29,22 @@ this changes nothing, and the threads that hold them would idle anyway); the tra
 pulse is the CPU's (``kernels.window``). Elastic power-law contacts (Hertz, n = 5/2, or any n), free end or fixed wall, no
 precompression and no damping: what else a chain declares is refused by ``CudaBackend.check``.
 
-The device functions the step loop calls (the force, the dense output, the root search) are in
-``granchain.backends.cuda.device``; the averaged pulse is reduced by ``granchain.backends.cuda.sums``.
+The step loop calls device functions of three modules: ``granchain.backends.cuda.methods`` (each method's
+stages and error estimate), ``granchain.backends.cuda.exchange`` (the group's reductions and the
+neighbours' positions for the forces) and ``granchain.backends.cuda.device`` (the force, the dense output,
+the root search); the averaged pulse is reduced by ``granchain.backends.cuda.sums``.
 """
 
 from __future__ import annotations
-
-import math
 
 from numba import cuda, float64, int64
 
 from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
 
-# The method's tables, the step control's constants and the stop and window rules: the CPU kernels' own
-# numbers (one source; the GPU code below is the CPU's written for CUDA).
-from ..kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN, pi_exponent
-from ..kernels.rkn4 import (
-    A10,
-    A20,
-    A21,
-    B0,
-    B1,
-    B2,
-    C1,
-    C2,
-    EB0,
-    EB1,
-    EB2,
-    EB3,
-    EP0,
-    EP1,
-    EP2,
-    EP3,
-    P0,
-    P1,
-    P2,
-    P3,
-)
-from ..kernels import dp5 as _dp5
-from ..kernels.schemes import DP5, RKN4
+# The step control's constants and the stop and window rules: the CPU kernels' own numbers (one source;
+# the GPU code below is the CPU's written for CUDA).
+from ..kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN
 from ..kernels.stop import RATTLER_MASS_RATIO
-from ..kernels.window import CUT_FORCE
 from .device import (
     FULL_MASK,
     contact_force,
@@ -80,24 +55,9 @@ from .device import (
     hermite3,
     hermite_max_estimate,
     root,
-    warp_any,
-    warp_last,
 )
-
-#: The PI controller's exponent of RKN4(3)'s error estimate (the CPU step loop's, ``rkloop.pi_exponent``).
-ALPHA_RKN4 = pi_exponent(RKN4)
-#: The same for DP5(4).
-ALPHA_DP5 = pi_exponent(DP5)
-#: Dormand-Prince 5(4)'s tableau (``kernels.dp5``, whose names RKN4's share: renamed D* here).
-D21 = _dp5.A21
-D31, D32 = _dp5.A31, _dp5.A32
-D41, D42, D43 = _dp5.A41, _dp5.A42, _dp5.A43
-D51, D52, D53, D54 = _dp5.A51, _dp5.A52, _dp5.A53, _dp5.A54
-D61, D62, D63, D64, D65 = _dp5.A61, _dp5.A62, _dp5.A63, _dp5.A64, _dp5.A65
-DB1, DB3, DB4, DB5, DB6 = _dp5.B1, _dp5.B3, _dp5.B4, _dp5.B5, _dp5.B6
-DE1, DE3, DE4, DE5, DE6, DE7 = _dp5.E1, _dp5.E3, _dp5.E4, _dp5.E5, _dp5.E6, _dp5.E7
-#: The methods :func:`make_kernel` compiles (``Integrator.name``).
-METHODS = ("rkn4", "dp5", "verlet")
+from .exchange import make_exchange
+from .methods import ALPHA, DP5_ROWS, METHODS, make_error, make_stages, make_velocity
 
 
 #: Layout of the float settings array ``prm`` the kernel reads.
@@ -111,7 +71,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     granules per thread (chains of up to ``L * G`` granules). ``L``, ``G``, the method and ``fixed`` are
     constants of its code: Numba prunes the barriers of ``L = 1`` and the other methods' code, and sizes
     the per-thread arrays by ``G``. ``max_registers`` caps the registers per thread (more resident chains
-    per multiprocessor, against spills: measured in benchmarks/bench_gpu.py).
+    per multiprocessor, against spills: measured in benchmarks/bench_gpu.py; what ptxas allots each
+    kernel, in benchmarks/gpu_registers.py).
 
     ``fixed``: RKN4 or DP5 with a fixed step (the first step, ``P_FIRST``): no error estimate, every step
     accepted, as the CPU's ``fixed_step`` (``rkloop``); a state that is not finite ends the run (NONFINITE).
@@ -132,8 +93,9 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
 
     Barriers: a group exchanges the stage positions through two alternating shared arrays, so that one
     barrier per force evaluation suffices (a thread can only overwrite an array after every thread has
-    passed the next barrier, i.e. finished reading it); per step, three for the stages, one for the
-    error norm and two for the candidates of peaks and of the trailing window's cut.
+    passed the next barrier, i.e. finished reading it); per step, one for each force evaluation (RKN4
+    three, DP5 six, Verlet one), one for the error norm and two for the candidates of peaks and of the
+    trailing window's cut.
 
     ``shuffle`` (``L`` = 32, one warp per chain): the neighbours' positions and every reduction of a step
     go through warp shuffles instead, with no barrier at all in a step without a peak or grid time (Numba's
@@ -148,11 +110,10 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     bit (integers); ``votes=False`` keeps the butterflies for the benchmark's comparison."""
     if method not in METHODS:
         raise ValueError(f"the cuda kernels integrate with {METHODS}, not {method!r}")
-    DP = method == "dp5"
     VERLET = method == "verlet"
     FIXED = bool(fixed) or VERLET
-    ALPHA = ALPHA_DP5 if DP else ALPHA_RKN4
-    GD = G if DP else 1  # DP5's stage arrays (one element, unused, in RKN4's kernel)
+    EXPONENT = 0.0 if FIXED else ALPHA[method]
+    SG = G if method == "dp5" else 1  # DP5's stage arrays (one element, unused, in the others' kernels)
     MMAX = L * G
     GROUP = L > 1
     SHUFFLE = bool(shuffle)
@@ -161,115 +122,11 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
         raise ValueError("the shuffle exchange needs one warp (32 threads) per chain")
     options = {} if max_registers is None else {"max_registers": max_registers}
 
-    @cuda.jit(device=True)
-    def sync():
-        if GROUP:
-            cuda.syncthreads()
-
-    @cuda.jit(device=True)
-    def group_max(value, red, lane):
-        """The maximum of ``value`` over the group's threads (every thread gets it)."""
-        if SHUFFLE:
-            off = 16
-            while off > 0:
-                value = max(value, cuda.shfl_xor_sync(FULL_MASK, value, off))
-                off //= 2
-            return value
-        red[lane] = value
-        sync()
-        m = red[0]
-        for l in range(1, L):
-            m = max(m, red[l])
-        return m
-
-    @cuda.jit(device=True)
-    def group_any(flag, red, lane):
-        """1 where ``flag`` (0 or 1) is 1 on any thread of the group, else 0 (every thread gets it)."""
-        if VOTES:
-            return warp_any(flag)
-        return group_max(flag, red, lane)
-
-    @cuda.jit(device=True)
-    def group_last(value, red, lane):
-        """The maximum over the group of ``value``, which is -1 or grows with the lane (an index of one of the
-        thread's own granules or observed granules): with votes, the value of the last lane that has one."""
-        if VOTES:
-            return warp_last(value)
-        return group_max(value, red, lane)
-
-    @cuda.jit(device=True)
-    def group_sum(value, red, lane):
-        """The sum of ``value`` over the group's threads, in an order fixed by the layout (deterministic)."""
-        if SHUFFLE:
-            off = 16
-            while off > 0:
-                value += cuda.shfl_xor_sync(FULL_MASK, value, off)
-                off //= 2
-            return value
-        red[lane] = value
-        sync()
-        total = 0.0
-        for l in range(L):
-            total += red[l]
-        return total
-
-    @cuda.jit(device=True)
-    def right_neighbour(values, own, M, shared):
-        """The value of granule own + G (the right neighbour of this thread's last granule; 0 past the chain):
-        from the next thread by a shuffle, or from ``shared`` (written, and a barrier passed, before)."""
-        if SHUFFLE:
-            return cuda.shfl_down_sync(FULL_MASK, values[0], 1)
-        j = own + G
-        return shared[j] if j < M else 0.0
-
-    @cuda.jit(device=True)
-    def forces(xs, own, M, lo, bx, c_left, c_right, inv_m, n, acc):
-        """acc[s] = the acceleration of owned granule s at the positions ``xs``: every thread of the group
-        calls it (the positions cross thread boundaries through ``bx``, or by shuffles). Granules behind the
-        trailing window (i < lo) are not integrated (acceleration 0: they continue ballistically) and the
-        contact at its edge is dropped (``kernels.window``)."""
-        if SHUFFLE:
-            xl = cuda.shfl_up_sync(FULL_MASK, xs[G - 1], 1)
-            xr = cuda.shfl_down_sync(FULL_MASK, xs[0], 1)
-        else:
-            for s in range(G):
-                i = own + s
-                if i < M:
-                    bx[i] = xs[s]
-            sync()
-        for s in range(G):
-            i = own + s
-            if i < M:
-                left = 0.0
-                right = 0.0
-                if SHUFFLE:
-                    if i > lo:
-                        left = contact_force((xs[s - 1] if s > 0 else xl) - xs[s], c_left[s], n)
-                    if i < M - 1:
-                        right = contact_force(xs[s] - (xs[s + 1] if s < G - 1 else xr), c_right[s], n)
-                else:
-                    if i > lo:
-                        left = contact_force(bx[i - 1] - xs[s], c_left[s], n)
-                    if i < M - 1:
-                        right = contact_force(xs[s] - bx[i + 1], c_right[s], n)
-                acc[s] = (left - right) * inv_m[s] if i >= lo else 0.0
-
-    @cuda.jit(device=True)
-    def cut_candidates(target, own, lo, M, xs, xr, c_right, n):
-        """This thread's share of ``kernels.window.open_contact_behind``: the last open contact j in
-        lo..target-1 among its own (the new positions ``xs``; ``xr`` the right neighbour of its last granule),
-        and the last one holding less than CUT_FORCE (-1: none)."""
-        j_open = int64(-1)
-        j_weak = int64(-1)
-        for s in range(G):
-            i = own + s
-            if i >= lo and i < target and i < M - 1:
-                d = xs[s] - (xs[s + 1] if s < G - 1 else xr)
-                if d <= 0.0:
-                    j_open = max(j_open, i)
-                elif contact_force(d, c_right[s], n) <= CUT_FORCE:
-                    j_weak = max(j_weak, i)
-        return j_open, j_weak
+    (sync, group_max, group_any, group_last, group_sum, right_neighbour, forces,
+     cut_candidates) = make_exchange(L, G, SHUFFLE, VOTES)
+    stages = make_stages(method, forces, G)
+    new_velocity = make_velocity(method)
+    step_error = make_error(method, fixed)
 
     @cuda.jit(**options)
     def kernel(masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, pulse_end, prm,
@@ -334,15 +191,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
         c_left = cuda.local.array(G, float64)
         c_right = cuda.local.array(G, float64)
         q_of = cuda.local.array(G, int64)
-        # DP5's stages 2..6: velocities u1..u5, accelerations k1, k2 (above) and k3..k5.
-        u1 = cuda.local.array(GD, float64)
-        u2 = cuda.local.array(GD, float64)
-        u3 = cuda.local.array(GD, float64)
-        u4 = cuda.local.array(GD, float64)
-        u5 = cuda.local.array(GD, float64)
-        k3 = cuda.local.array(GD, float64)
-        k4 = cuda.local.array(GD, float64)
-        k5 = cuda.local.array(GD, float64)
+        stage = cuda.local.array((DP5_ROWS, SG), float64)  # DP5's stages besides k1, k2 (``methods``)
 
         rtol = prm[P_RTOL]
         atol = prm[P_ATOL]
@@ -426,77 +275,15 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 h = t_stop - t
                 last = True
             h2 = h * h
-            if VERLET:
-                # ``kernels.verlet``: x' = x + h v + h^2 a / 2, v' = v + h (a + a') / 2.
-                for s in range(G):
-                    xs[s] = x[s] + (h * v[s] + 0.5 * h * h * a0[s])
-                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, a3)
-                for s in range(G):
-                    vs[s] = v[s] + 0.5 * h * (a0[s] + a3[s])
-            elif DP:
-                # Stages 2..7 (``kernels.dp5.stages``, the same arithmetic in the same order): the 7th is the
-                # new state, xs, vs, and a3 its force per mass.
-                for s in range(G):
-                    xs[s] = x[s] + h * (D21 * v[s])
-                    u1[s] = v[s] + h * (D21 * a0[s])
-                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k1)
-                for s in range(G):
-                    xs[s] = x[s] + h * (D31 * v[s] + D32 * u1[s])
-                    u2[s] = v[s] + h * (D31 * a0[s] + D32 * k1[s])
-                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k2)
-                for s in range(G):
-                    xs[s] = x[s] + h * (D41 * v[s] + D42 * u1[s] + D43 * u2[s])
-                    u3[s] = v[s] + h * (D41 * a0[s] + D42 * k1[s] + D43 * k2[s])
-                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k3)
-                for s in range(G):
-                    xs[s] = x[s] + h * (D51 * v[s] + D52 * u1[s] + D53 * u2[s] + D54 * u3[s])
-                    u4[s] = v[s] + h * (D51 * a0[s] + D52 * k1[s] + D53 * k2[s] + D54 * k3[s])
-                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k4)
-                for s in range(G):
-                    xs[s] = x[s] + h * (D61 * v[s] + D62 * u1[s] + D63 * u2[s] + D64 * u3[s] + D65 * u4[s])
-                    u5[s] = v[s] + h * (D61 * a0[s] + D62 * k1[s] + D63 * k2[s] + D64 * k3[s] + D65 * k4[s])
-                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k5)
-                for s in range(G):
-                    xs[s] = x[s] + h * (DB1 * v[s] + DB3 * u2[s] + DB4 * u3[s] + DB5 * u4[s] + DB6 * u5[s])
-                    vs[s] = v[s] + h * (DB1 * a0[s] + DB3 * k2[s] + DB4 * k3[s] + DB5 * k4[s] + DB6 * k5[s])
-                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, a3)
-            else:
-                # Stages 1..3 (``kernels.rkn4.stages``); a3 is the force per mass at the new position.
-                for s in range(G):
-                    xs[s] = x[s] + h * (C1 * v[s]) + h2 * (A10 * a0[s])
-                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, k1)
-                for s in range(G):
-                    xs[s] = x[s] + h * (C2 * v[s]) + h2 * (A20 * a0[s] + A21 * k1[s])
-                forces(xs, own, M, lo, bxa, c_left, c_right, inv_m, n, k2)
-                for s in range(G):
-                    xs[s] = x[s] + h * v[s] + h2 * (B0 * a0[s] + B1 * k1[s] + B2 * k2[s])
-                forces(xs, own, M, lo, bxb, c_left, c_right, inv_m, n, a3)
-            # The new velocities (RKN4) and this thread's share of the error norm (``error_ratios`` of
-            # ``kernels.rkn4`` or ``kernels.dp5``).
+            stages(x, v, a0, xs, vs, a3, k1, k2, stage, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, n)
+            # The new velocities (RKN4) and this thread's share of the error norm.
             e = 0.0
             for s in range(G):
                 i = own + s
-                if not DP and not VERLET:
-                    vs[s] = v[s] + h * (P0 * a0[s] + P1 * k1[s] + P2 * k2[s] + P3 * a3[s])
+                new_velocity(s, v, vs, a0, k1, k2, a3, h)
                 if i < M:
-                    if FIXED:  # no error estimate: the norm is 0, or inf where the new state is not finite
-                        if not (abs(xs[s]) < math.inf and abs(vs[s]) < math.inf):
-                            e = math.inf
-                    else:
-                        w = relax_factor if i < relaxed else 1.0
-                        if DP:
-                            ex = h * (DE1 * v[s] + DE3 * u2[s] + DE4 * u3[s] + DE5 * u4[s] + DE6 * u5[s] + DE7 * vs[s])
-                            ev = h * (DE1 * a0[s] + DE3 * k2[s] + DE4 * k3[s] + DE5 * k4[s] + DE6 * k5[s] + DE7 * a3[s])
-                        else:
-                            ex = h2 * (EB0 * a0[s] + EB1 * k1[s] + EB2 * k2[s] + EB3 * a3[s])
-                            ev = h * (EP0 * a0[s] + EP1 * k1[s] + EP2 * k2[s] + EP3 * a3[s])
-                        rx = abs(ex) / ((atol + rtol * max(abs(x[s]), abs(xs[s]))) * w)
-                        rv = abs(ev) / ((atol + rtol * max(abs(v[s]), abs(vs[s]))) * w)
-                        if not (rx <= 1e300):  # inf or NaN wins (a max would drop a NaN)
-                            rx = math.inf
-                        if not (rv <= 1e300):
-                            rv = math.inf
-                        e = max(e, max(rx, rv))
+                    w = relax_factor if i < relaxed else 1.0
+                    e = max(e, step_error(s, x, v, xs, vs, a0, k1, k2, a3, stage, h, h2, w, rtol, atol))
                     if not SHUFFLE:
                         if i == M - 2:
                             tail[0] = xs[s]
@@ -531,7 +318,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 break
             if err > 1.0:
                 n_rej += 1
-                h *= max(MIN_FACTOR, SAFETY * err ** -ALPHA)
+                h *= max(MIN_FACTOR, SAFETY * err ** -EXPONENT)
                 if h < 1e-14 * max(1.0, t):
                     status = STEP_UNDERFLOW
                 continue
@@ -711,7 +498,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
             if VERLET:
                 h = h_fixed  # (a step shortened to land on the end is not kept: ``kernels.verlet``)
             elif not FIXED:
-                fac = SAFETY * max(err, 1e-10) ** -ALPHA * err_old ** BETA
+                fac = SAFETY * max(err, 1e-10) ** -EXPONENT * err_old ** BETA
                 fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
                 h *= fac
                 err_old = max(err, 1e-4)
