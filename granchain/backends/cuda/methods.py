@@ -43,8 +43,9 @@ DE1, DE3, DE4, DE5, DE6, DE7 = _dp5.E1, _dp5.E3, _dp5.E4, _dp5.E5, _dp5.E6, _dp5
 def make_stages(method: str, forces, G: int):
     """The device function ``stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left,
     c_right, inv_m, n)`` of ``method``: one step of size ``h`` (``h2`` = h^2) from the thread's granules'
-    state ``x``, ``v`` and acceleration ``a0`` to the new state ``xs``, ``vs`` and its acceleration ``a3``
-    (the next step's first stage), the intermediate stages in ``k1``, ``k2`` and, for DP5, the rows of
+    state ``x``, ``v`` and acceleration ``a0`` to the new state ``xs``, ``vs`` (RKN4's velocities after the
+    stages: :func:`make_velocity`) and its acceleration ``a3`` (the next step's first stage), the
+    intermediate stages in ``k1``, ``k2`` and, for DP5, the rows of
     ``S`` (:data:`DP5_ROWS`). ``forces`` is the layout's force evaluation (``exchange.make_exchange``),
     which every thread of the group calls at the same stages; its two shared arrays ``bxa``, ``bxb``
     alternate, so that one barrier per evaluation suffices."""
