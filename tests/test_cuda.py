@@ -133,12 +133,13 @@ def test_warp_votes_give_the_last_lanes_value():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", ["rkn4", "dp5"])
+@pytest.mark.parametrize("method", ["rkn4", "dp5", "verlet"])
 @pytest.mark.parametrize("wall", [False, True], ids=["free end", "wall"])
 def test_single_chain_against_dop853(wall, method):
-    """``simulate(backend=...)`` on the GPU backend, with each method it has a kernel for, against SciPy's
-    DOP853 (an independent integrator): peaks, grid velocities and (with a wall) the wall's peak force
-    within the accuracy contract."""
+    """``simulate(backend=...)`` on the GPU backend, with each method it has a kernel for (Verlet at dt =
+    2.5e-4, the step at which it meets the contract on decorated chains: ``benchmarks/bench_verlet.py``),
+    against SciPy's DOP853 (an independent integrator): peaks, grid velocities and (with a wall) the wall's
+    peak force within the accuracy contract."""
     res = sim("versus_dop853", 1, wall, method)
     gpu, ref = res["cuda"], res["dop853"]
     assert gpu["status"] == ref["status"] == 0
