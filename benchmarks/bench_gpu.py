@@ -11,7 +11,8 @@ the same run:
    warp per chain: warp shuffles with votes, the default; shuffle trees for the integer reductions;
    capped at 168 registers, which ptxas reaches without spills, and at 128, with some
    (``benchmarks/gpu_registers.py``); shared memory) and 1 (one thread per chain: 3,000 realisations,
-   scaled linearly, said in the line; L = 64 ran 3.5x slower than 32 on an H200 and is no longer timed); the integration time is the backend's own (``timings``: device time, synchronised, summed
+   scaled linearly, said in the line; L = 64 ran 3.5x slower than 32 on an H200 and is no longer timed);
+   the integration time is the backend's own (``timings``: device time, synchronised, summed
    over the run's batches, the pulse-window pilot included), the wall time is ``run_ensemble``'s; then
    the effective N = 26 set (L = 32) with the GPU's default, RKN4, and with DP5 (their CPU default, asked
    for), and the ratio of the two. A small warm-up per layout comes first, its time printed apart

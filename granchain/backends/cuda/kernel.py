@@ -57,7 +57,7 @@ from .device import (
     root,
 )
 from .exchange import make_exchange
-from .methods import ALPHA, DP5_ROWS, METHODS, make_error, make_stages, make_velocity
+from .methods import ALPHA, DP5_ROWS, make_error, make_stages, make_velocity
 
 
 #: Layout of the float settings array ``prm`` the kernel reads.
@@ -108,11 +108,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     maximum is the value of the last lane that has one: one ballot and one 32-bit shuffle, where a
     butterfly of 64-bit maxima takes five shuffle rounds of two instructions each. Same results bit for
     bit (integers); ``votes=False`` keeps the butterflies for the benchmark's comparison."""
-    if method not in METHODS:
-        raise ValueError(f"the cuda kernels integrate with {METHODS}, not {method!r}")
     VERLET = method == "verlet"
     FIXED = bool(fixed) or VERLET
-    EXPONENT = 0.0 if FIXED else ALPHA[method]
     SG = G if method == "dp5" else 1  # DP5's stage arrays (one element, unused, in the others' kernels)
     MMAX = L * G
     GROUP = L > 1
@@ -124,9 +121,10 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
 
     (sync, group_max, group_any, group_last, group_sum, right_neighbour, forces,
      cut_candidates) = make_exchange(L, G, SHUFFLE, VOTES)
-    stages = make_stages(method, forces, G)
+    stages = make_stages(method, forces, G)  # (refuses a method it has no stages for)
     new_velocity = make_velocity(method)
     step_error = make_error(method, fixed)
+    EXPONENT = 0.0 if FIXED else ALPHA[method]
 
     @cuda.jit(**options)
     def kernel(masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, pulse_end, prm,
