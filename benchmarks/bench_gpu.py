@@ -39,6 +39,12 @@ the same run:
    1e-6 relative, peak times within 1e-5; each backend is held to it against DOP853, so two backends
    may differ by up to twice it). Each line names the integrators the two runs used.
 
+6. ``[6 damped]``: the decorated N = 26 set with Kuwabara-Kono viscoelastic contacts (restitution 0.9 at the
+   impact speed, ``granchain.Viscoelastic.from_restitution``): the GPU backend's DP5 (the default for
+   contacts that dissipate) on 3,000 realisations, the same on the CPU's 16 threads, their wall times and
+   ratio, and the largest differences of the two backends' peak velocities, peak times and dissipated
+   energies. Not a target: it shows what dissipative ensembles cost on the GPU.
+
 ``[summary]``: decorated integration <= 1.5 s; >= 8x the peer; >= 20x CPU-16; reproduce integration
 <= 10 s, wall <= 60 s; CPU >= 13x on 16 threads; each PASS/FAIL with its number (MISSING where the
 part that measures it failed or was skipped).
@@ -110,6 +116,7 @@ class Sizes:
     sweep: int = 1_000
     threads: tuple = (1, 2, 4, 8, 16)
     agree: int = 1_000
+    damped: int = 3_000
     peer_check: int = 100
     peer_dt: float = 2.5e-4
     peer_t_end: float | None = None  # None: the ensemble's time grid end
@@ -130,7 +137,7 @@ FULL = Sizes()
 #: The simulator runs a block's threads as Python threads in step: an N = 4 chain took 154 s with 32
 #: threads (75 s without the pulse-window pilot's 64 chains), so the smoke run has no pilot
 #: (``pulse_window="full"``) and stops every realisation after 20 steps (status MAX_STEPS).
-SMOKE = Sizes(n_large=4, realizations=2, naive=2, warmup=1, cpu16=2, sweep=4, agree=2, peer_check=2,
+SMOKE = Sizes(n_large=4, realizations=2, naive=2, warmup=1, cpu16=2, sweep=4, agree=2, damped=2, peer_check=2,
               peer_dt=5e-3, peer_t_end=3.0, reproduce=("--realizations", "20"), budget_s=170.0,
               ensemble_kw=(("pulse_window", "full"), ("max_steps", 20)),
               # (the simulator emulates a warp shuffle with two barriers of 32 Python threads: ~1 minute for the
@@ -180,13 +187,14 @@ def gpu_backend(layout, stub: bool):
     return CudaBackend(threads_per_chain=L, exchange=exchange, max_registers=regs, votes=votes)
 
 
-def ensemble(run, realizations, seed, chains, *, backend=None, chunk_size=None, threads=None, integrator=None):
-    """``granchain.run_ensemble`` of the run's family in memory, no progress, with the run's keywords;
+def ensemble(run, realizations, seed, chains, *, backend=None, chunk_size=None, threads=None, integrator=None,
+             family=None):
+    """``granchain.run_ensemble`` of ``family`` (default the run's) in memory, no progress, with the run's keywords;
     ``backend`` passed only where one is named (else the CPU default; the stub runs the CPU ensemble and
     appends its wall time to its ``timings``); ``integrator`` likewise (else the family's default)."""
     import granchain as gc
 
-    family = run.family()
+    family = run.family() if family is None else family
     kw = {"realizations": realizations, "seed": seed, "chains": chains, "out": None, "progress": False,
           **dict(run.sizes.ensemble_kw), **({} if integrator is None else {"integrator": integrator})}
     if chunk_size is not None:
@@ -361,12 +369,12 @@ def cpu_seconds() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
-def gpu_run(run: Run, backend, chains: str, R: int, integrator=None):
+def gpu_run(run: Run, backend, chains: str, R: int, integrator=None, family=None):
     """One timed GPU ensemble of R realisations (seed 0, one chunk): (Dataset, integration s, wall s, the
     backend's timings of the run: one per batch, the pulse-window pilot's first)."""
     n0 = len(backend.timings)
     t0 = time.perf_counter()
-    ds = ensemble(run, R, 0, chains, backend=backend, chunk_size=R, integrator=integrator)
+    ds = ensemble(run, R, 0, chains, backend=backend, chunk_size=R, integrator=integrator, family=family)
     wall = time.perf_counter() - t0
     new = backend.timings[n0:]
     return ds, sum(float(t["kernel_s"]) for t in new), wall, new
@@ -657,6 +665,44 @@ def part_agree(run: Run) -> None:
                             f"(1e-6 relative, 1e-5) {fraction(within)} of the peaks, within twice it {fraction(within2)}{run.tag}")
 
 
+def part_damped(run: Run) -> None:
+    import numba
+
+    import granchain as gc
+
+    s = run.sizes
+    R = s.damped
+    if not run.fits("6 damped", 40.0):
+        return
+    law = gc.Viscoelastic.from_restitution(0.9)
+    family = gc.RandomDecorated(s.n_large, contact=law)
+    label = f"decorated N={s.n_large}, {law.label()} (restitution 0.9)"
+    backend = gpu_backend(s.reference, run.stub)
+    t0 = time.perf_counter()
+    ensemble(run, s.warmup, 0, "decorated", backend=backend, chunk_size=s.warmup, family=family)
+    run.line("6 compile", f"{label}: warm-up of {s.warmup} realisations {time.perf_counter() - t0:.2f} s{run.tag}")
+    gpu, kernel, wall, timings = gpu_run(run, backend, "decorated", R, family=family)
+    threads = max(t for t in s.threads if t <= numba.config.NUMBA_NUM_THREADS)  # (16 on the device machine)
+    ensemble(run, 2 * threads, 0, "decorated", threads=threads, family=family)  # (compiles the CPU's damped DP5)
+    t0 = time.perf_counter()
+    cpu = ensemble(run, R, 0, "decorated", threads=threads, family=family)
+    cpu_wall = time.perf_counter() - t0
+    run.line("6 damped", f"{label}: GPU L={s.reference} {R:,} realisations ({integrator_of(gpu)}): integration {kernel:.3f} s, "
+                         f"wall {wall:.3f} s; CPU {threads} threads ({integrator_of(cpu)}): wall {cpu_wall:.3f} s; "
+                         f"CPU-{threads} wall / GPU wall = {cpu_wall / wall:.2f}x{run.tag}")
+    gv, gt, gok = peaks(gpu)
+    cv, ct, cok = peaks(cpu)
+    ok, which = compared(gok, cok, gv, cv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dv = np.abs(gv / cv - 1.0)[ok]
+        de = np.abs(gpu["dissipated_energy"].isel(chain=0).values / cpu["dissipated_energy"].isel(chain=0).values - 1.0)[ok]
+    dt = np.abs(gt - ct)[ok]
+    run.line("6 agree", f"{label} ({which}): largest relative peak-velocity difference {worst(dv):.2e}, largest peak-time "
+                        f"difference {worst(dt):.2e}, largest relative difference of the dissipated energy {worst(de):.2e} "
+                        f"(mean dissipated {float(np.nanmean(cpu['dissipated_energy'].values)):.4g} of the impulse's 0.5)"
+                        f"{run.tag}")
+
+
 def summary(run: Run) -> None:
     run.line("summary", f"targets ({'smoke run: sizes too small to judge' if run.smoke else 'full run'}; device {run.device}; "
                         f"{os.cpu_count()} CPUs){run.tag}")
@@ -672,7 +718,7 @@ def summary(run: Run) -> None:
 
 
 PARTS = {1: ("gpu", part_gpu), 2: ("peer", part_peer), 3: ("cpu", part_cpu), 4: ("reproduce", part_reproduce),
-         5: ("agree", part_agree)}
+         5: ("agree", part_agree), 6: ("damped", part_damped)}
 
 
 def main(argv=None) -> int:
@@ -681,7 +727,7 @@ def main(argv=None) -> int:
                                                          "checks the script, measures nothing")
     ap.add_argument("--stub", action="store_true", help="a stand-in for the CUDA backend (the CPU ensemble, timed): "
                                                         "automatic with --smoke where granchain.backends.cuda is missing")
-    ap.add_argument("--parts", default="1,2,3,4,5", help="which parts to run, comma-separated (default all: 1,2,3,4,5)")
+    ap.add_argument("--parts", default="1,2,3,4,5,6", help="which parts to run, comma-separated (default all: 1,2,3,4,5,6)")
     ap.add_argument("--layouts", default=None, help="part 1's layouts, comma-separated: threads per chain, then "
                                                     "optionally /shuffle or /shared, /REGS (a register cap) and "
                                                     "/butterfly (no warp votes); default "
@@ -692,9 +738,9 @@ def main(argv=None) -> int:
     try:
         parts = tuple(sorted({int(p) for p in args.parts.split(",") if p.strip()}))
     except ValueError:
-        ap.error(f"--parts must be part numbers 1-5 separated by commas, got {args.parts!r}")
+        ap.error(f"--parts must be part numbers 1-6 separated by commas, got {args.parts!r}")
     if not parts or any(p not in PARTS for p in parts):
-        ap.error(f"--parts must be part numbers 1-5 separated by commas, got {args.parts!r}")
+        ap.error(f"--parts must be part numbers 1-6 separated by commas, got {args.parts!r}")
     sizes = SMOKE if args.smoke else FULL
     if args.budget is not None:
         if not args.budget > 0:

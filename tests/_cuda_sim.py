@@ -34,16 +34,19 @@ def outputs(R: int, K: int, C: int, T: int) -> dict:
             "peak_force_time": np.zeros((R, C)), "peak_wall_force": np.zeros(R), "peak_wall_force_time": np.zeros(R), "status": np.zeros(R, np.int64),
             "n_steps": np.zeros(R, np.int64), "t_end": np.zeros(R), "energy_error": np.zeros(R),
             "sum_v": np.zeros((T, K), np.int64), "sum_v2": np.zeros((T, K), np.int64),
-            "sum_wall": np.zeros(T, np.int64), "n_valid": np.zeros(1, np.int64), "lags": None}
+            "sum_wall": np.zeros(T, np.int64), "n_valid": np.zeros(1, np.int64), "dissipated_energy": np.zeros(R), "lags": None}
 
 
 def integrator_of(spec: str):
     """The integrator named by ``spec``: a chain kind, for the ensembles' default ("decorated": windowed RKN4,
-    "effective": windowed DP5), "verlet:DT", or "rkn4:DT" / "dp5:DT" for a fixed step DT."""
+    "effective": windowed DP5), "damped" (the default for contacts that dissipate: DP5, relaxed zone, every granule
+    to the end), "verlet:DT", or "rkn4:DT" / "dp5:DT" for a fixed step DT."""
     import granchain as gc
     from granchain.ensembles.run import ensemble_integrator
 
     name, _, dt = spec.partition(":")
+    if name == "damped":
+        return ensemble_integrator("decorated", conservative=False)
     if not dt:
         return ensemble_integrator(name)
     if name == "verlet":
@@ -51,31 +54,46 @@ def integrator_of(spec: str):
     return {"rkn4": gc.RKN4, "dp5": gc.DP5}[name](fixed_step=float(dt))
 
 
+def contact_of(spec: str | None):
+    """The contact law named by ``spec``: None (the paper's elastic one), "kuwabara-kono:GAMMA" (clamped),
+    "kuwabara-kono-unclamped:GAMMA" or "viscous:GAMMA" (unclamped, the authors' form)."""
+    import granchain as gc
+
+    if spec is None:
+        return None
+    name, _, gamma = spec.partition(":")
+    return {"kuwabara-kono": lambda g: gc.Viscoelastic(g), "kuwabara-kono-unclamped": lambda g: gc.Viscoelastic(g, clamp=False),
+            "viscous": lambda g: gc.Viscous(g)}[name](float(gamma))
+
+
 def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str = "decorated", pulse_end=None,
-              integrator: str = "decorated") -> dict:
-    """``integrator``: see :func:`integrator_of`."""
+              integrator: str = "decorated", contact: str | None = None) -> dict:
+    """``integrator``: see :func:`integrator_of`; ``contact``: :func:`contact_of`."""
     from granchain.solve.integrators import RunControls
 
     masses, stiffness, n, v0, observed, contacts = batch(n_large, realizations, kind)
     t_grid = np.arange(0.0, t_end, 0.5)
     out = outputs(realizations, observed.size, contacts.size, t_grid.size)
+    law = contact_of(contact)
     backend.integrate_batch(integrator_of(integrator), masses, stiffness, n, v0, observed, contacts, t_grid=t_grid,
-                            t_max=200.0, controls=RunControls(), scale=2.0**30, out=out, pulse_end=pulse_end)
+                            t_max=200.0, controls=RunControls(), scale=2.0**30, out=out, pulse_end=pulse_end,
+                            model=None if law is None else {"contact": law})
     return {k: a.tolist() for k, a in out.items() if k != "lags"}
 
 
 def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end: float, windows: bool,
-            repeat: bool = False, votes: bool = True, kind: str = "decorated", integrator: str = "decorated") -> dict:
+            repeat: bool = False, votes: bool = True, kind: str = "decorated", integrator: str = "decorated",
+            contact: str | None = None) -> dict:
     """The CUDA backend and the CPU's Numba backend on the same batch: every per-realisation result and sum
     (``repeat``: the GPU run twice, ``"again"`` the second, with ``votes`` negated where the exchange is by
     shuffles (the shuffle trees against the warp votes: the same results); else ``"again"`` is None).
-    ``kind``: the chains; ``integrator``: whose default method (``run_batch``)."""
+    ``kind``: the chains; ``integrator``: whose default method, ``contact``: their law (``run_batch``)."""
     from granchain.backends import get_backend
     from granchain.backends.cuda import CudaBackend
 
     ends = np.linspace(6.0, t_end, n_large) if windows else None  # averaged-pulse windows closing one by one
     gpu = CudaBackend(threads, exchange=exchange, votes=votes)
-    kw = {"pulse_end": ends, "kind": kind, "integrator": integrator}
+    kw = {"pulse_end": ends, "kind": kind, "integrator": integrator, "contact": contact}
     first = run_batch(gpu, n_large, realizations, t_end, **kw)
     other = CudaBackend(threads, exchange=exchange, votes=not votes) if exchange == "shuffle" else gpu
     again = run_batch(other, n_large, realizations, t_end, **kw) if repeat else None
@@ -83,12 +101,14 @@ def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end:
     return {"cuda": first, "again": again, "cpu": cpu}
 
 
-def versus_dop853(threads: int, wall: bool, method: str = "rkn4") -> dict:
+def versus_dop853(threads: int, wall: bool, method: str = "rkn4", contact: str | None = None) -> dict:
     """``simulate(..., backend="cuda")`` with ``method`` ("rkn4" or "dp5" at rtol 1e-10, "verlet" at dt = 2.5e-4)
-    and DOP853 on a small decorated chain (with a wall or a free end)."""
+    and DOP853 on a small decorated chain (with a wall or a free end; ``contact``: its law, :func:`contact_of`)."""
     import granchain as gc
 
     chain = gc.decorated([0.3, 0.05, 0.2])
+    if contact is not None:
+        chain = chain.replace(contact=contact_of(contact))
     if wall:
         chain = chain.with_wall()
     grid = np.linspace(0.0, 12.0, 25)
@@ -96,12 +116,18 @@ def versus_dop853(threads: int, wall: bool, method: str = "rkn4") -> dict:
 
     res = {}
     method = gc.Verlet(2.5e-4) if method == "verlet" else {"rkn4": gc.RKN4, "dp5": gc.DP5}[method](1e-10, 1e-13)
+    # A damped chain to a fixed end, so that the dissipated energies are of the same interval (the two
+    # integrators see the pulse leave at instants that differ within their tolerances, and the granules
+    # behind it keep dissipating).
+    end = {"stop": "t_max", "t_max": 15.0} if contact is not None else {}
     for name, kw in (("cuda", {"integrator": method, "backend": CudaBackend(threads)}),
                      ("dop853", {"integrator": "dop853"})):
-        r = gc.simulate(chain, t_grid=grid, **kw)
+        r = gc.simulate(chain, t_grid=grid, **kw, **end)
         res[name] = {"status": int(r.status), "peak_velocity": r.peak_velocity.tolist(), "peak_time": r.peak_time.tolist(),
                      "grid": r.velocity.tolist(), "energy_error": float(r.energy_error),
-                     "peak_force": np.asarray(r.peak_force).tolist()}
+                     "peak_force": np.asarray(r.peak_force).tolist(), "dissipated_energy": float(r.dissipated_energy),
+                     "peak_force_time": np.asarray(r.peak_force_time).tolist(),
+                     "wall_force": None if r.wall_force is None else np.asarray(r.wall_force).tolist()}
     return res
 
 
@@ -141,7 +167,8 @@ def refusals() -> dict:
     cases = {
         "dop853": lambda: gc.simulate(chain, "dop853", backend=backend),
         "precompression": lambda: gc.simulate(chain.with_precompression(1e-3), "rkn4", backend=backend),
-        "dissipation": lambda: gc.simulate(chain.with_dissipation(0.1), "dp5", backend=backend),
+        "yielding contacts": lambda: gc.simulate(chain.replace(contact=gc.ElasticPlastic(0.5)), "dp5", backend=backend),
+        "damping with RKN4": lambda: gc.simulate(chain.with_dissipation(0.1), "rkn4", backend=backend),
         "sensors": lambda: gc.simulate(gc.decorated([0.3, 0.05, 0.3]), "rkn4", backend=backend, sensors=[2],
                                        t_grid=np.linspace(0, 5, 6)),
         "aligned pulse": lambda: gc.run_ensemble(3, realizations=2, chains="decorated", backend=backend, progress=False,

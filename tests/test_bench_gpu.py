@@ -34,6 +34,8 @@ PART_LINES = {
     "4 reproduce": r"^\[4 reproduce\] `granchain reproduce .*wall [\d.]+ s",
     "5 agree decorated": r"^\[5 agree\] decorated N=4, .*within the contract",
     "5 agree effective": r"^\[5 agree\] effective N=4, .*within the contract",
+    "6 damped": r"^\[6 damped\] decorated N=4, viscoelastic .*GPU L=32/shared .*dp5 rtol.*CPU-\d+ wall / GPU wall = [\d.]+x",
+    "6 agree": r"^\[6 agree\] decorated N=4, viscoelastic .*relative difference of the dissipated energy",
     "summary": r"^\[summary\] decorated integration +<= 1.5 s: (PASS|FAIL) ",
     "summary total": r"^\[summary\] total [\d.]+ s",
 }

@@ -113,6 +113,57 @@ def test_fixed_steps_are_the_cpu_kernels(integrator):
     assert res["cpu"]["n_valid"] == [2]
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("contact", ["kuwabara-kono:0.05", "viscous:0.1"])
+def test_damped_dp5_is_the_cpu_kernel(contact):
+    """DP5 on contacts that dissipate (Kuwabara-Kono's clamped law; the viscous law of Rosas et al., unclamped),
+    one thread per chain, with the trailing window cutting (12 large granules, averaged-pulse windows
+    closing from t = 6): the CPU's steps, its dissipated energy and energy balance to rounding (the forces
+    read the stage velocities, the dissipated energy's error steers the step, and after a cut the first stage
+    is evaluated again without the contact at the window's edge: leaving that out changed 4 of 581 steps and
+    the dissipated energy by 3e-7, measured), peaks within 1e-8 (read on another interpolant: measured 5e-10),
+    the force peaks at the root of the force's rate."""
+    res = sim("compare", 1, "shared", 12, 2, 30.0, True, False, True, "effective", "effective", contact)
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert_same_steps(gpu, cpu, rtol=1e-8)
+    assert min(cpu["dissipated_energy"]) > 0.05
+    np.testing.assert_allclose(gpu["dissipated_energy"], cpu["dissipated_energy"], rtol=1e-13)
+
+
+@pytest.mark.slow
+def test_damped_exchange_across_threads():
+    """The damped forces' exchange of stage velocities through shared memory (four threads a chain, two
+    granules each), Kuwabara-Kono's unclamped law: the CPU's run within the contract (each thread applies the
+    dissipation's quadrature to its own contacts and the group adds the shares: rounded in another order,
+    which may move a step by its last bits, so steps within 1 % and peaks within 1e-7), the dissipated energy
+    within 1e-9, and a second run bitwise the first (the group's sums are in a fixed order)."""
+    res = sim("compare", 4, "shared", 8, 1, 16.0, False, True, True, "effective", "damped", "kuwabara-kono-unclamped:0.05")
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert gpu["status"] == cpu["status"] == [0]
+    np.testing.assert_allclose(gpu["n_steps"], cpu["n_steps"], rtol=0.01)
+    for key in ("peak_velocity", "peak_force"):
+        np.testing.assert_allclose(gpu[key], cpu[key], rtol=1e-7, err_msg=key)
+    np.testing.assert_allclose(gpu["dissipated_energy"], cpu["dissipated_energy"], rtol=1e-9)
+    np.testing.assert_allclose(gpu["energy_error"], cpu["energy_error"], atol=1e-10)
+    assert res["again"] == gpu
+
+
+@pytest.mark.slow
+def test_damped_forces_by_warp_shuffles():
+    """One warp per chain (the default layout): the stage velocities of the neighbours by warp shuffles and the
+    dissipated energy's shares by a shuffle butterfly, the viscous law of Rosas et al.: the CPU's run within the
+    contract (as across the shared-memory exchange, within 1 % in steps, 1e-7 in peaks, 1e-9 in the dissipated
+    energy). A tiny chain: the simulator runs the warp's 32 threads in Python (two minutes)."""
+    res = sim("compare", 32, "shuffle", 3, 1, 10.0, False, False, True, "effective", "damped", "viscous:0.1")
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert gpu["status"] == cpu["status"] == [0]
+    np.testing.assert_allclose(gpu["n_steps"], cpu["n_steps"], rtol=0.01)
+    for key in ("peak_velocity", "peak_force"):
+        np.testing.assert_allclose(gpu[key], cpu[key], rtol=1e-7, err_msg=key)
+    assert cpu["dissipated_energy"][0] > 0.1
+    np.testing.assert_allclose(gpu["dissipated_energy"], cpu["dissipated_energy"], rtol=1e-9)
+
+
 def test_warp_votes_give_the_last_lanes_value():
     """The shuffle exchange's integer reductions (``device.warp_last``, ``warp_any``) against NumPy's maximum
     over the warp, on values that are -1 or grow with the lane: none set, all set, only lane 31 (the ballot's
@@ -150,8 +201,31 @@ def test_single_chain_against_dop853(wall, method):
     assert abs(gpu["energy_error"]) < 1e-8
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("contact", ["kuwabara-kono:0.05", "viscous:0.1"])
+@pytest.mark.parametrize("wall", [False, True], ids=["free end", "wall"])
+def test_damped_chain_against_dop853(wall, contact):
+    """DP5 on the GPU backend for contacts that dissipate, against SciPy's DOP853 to the same end (t = 15):
+    peaks, grid velocities, force peaks and their times, the wall force on the grid, and the dissipated
+    energy within the accuracy contract; the energy balance E_end + E_dissipated = E_0 within 1e-8."""
+    res = sim("versus_dop853", 1, wall, "dp5", contact)
+    gpu, ref = res["cuda"], res["dop853"]
+    assert gpu["status"] == ref["status"] == 0
+    np.testing.assert_allclose(gpu["peak_velocity"], ref["peak_velocity"], rtol=1e-6)
+    np.testing.assert_allclose(gpu["peak_time"][1:-1], ref["peak_time"][1:-1], atol=1e-5)
+    np.testing.assert_allclose(gpu["grid"], ref["grid"], atol=1e-6)
+    np.testing.assert_allclose(gpu["peak_force"], ref["peak_force"], rtol=1e-6)
+    np.testing.assert_allclose(gpu["peak_force_time"], ref["peak_force_time"], atol=1e-5)
+    assert ref["dissipated_energy"] > 0.04
+    np.testing.assert_allclose(gpu["dissipated_energy"], ref["dissipated_energy"], rtol=1e-6)
+    if wall:
+        np.testing.assert_allclose(gpu["wall_force"], ref["wall_force"], atol=1e-8)
+    assert abs(gpu["energy_error"]) < 1e-8
+
+
 def test_what_it_cannot_run_is_refused_naming_the_cpu_backend():
     got = sim("refusals")
+    assert "DP5" in got.pop("damping with RKN4")  # the CPU refuses it too: the message names the methods that run it
     for case, message in got.items():
         assert message != "accepted", case
         assert "backend='cpu'" in message, (case, message)

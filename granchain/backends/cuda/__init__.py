@@ -4,13 +4,14 @@
 validity maps) and single chains (``simulate(..., backend="cuda")``) with the kernels of
 :mod:`granchain.backends.cuda.kernel` (its docstring says why a chain is a block of threads, not one
 thread). It runs what the CPU kernels run for elastic chains: RKN4 and DP5 with the same step control
-(or a fixed step), velocity Verlet, the same peaks, grid samples and stop rule, so its per-realisation
+(or a fixed step), velocity Verlet, the same peaks, grid samples and stop rule, and DP5 for chains whose
+contacts dissipate (Kuwabara & Kono's viscoelastic law, the viscous law of Rosas et al.), with the energy
+they dissipate integrated and its error controlled as the CPU does, so its per-realisation
 results agree with the CPU backend's within the accuracy contract (not bit for bit: the GPU's fused
 multiply-adds round differently, and DP5's peaks are read on another interpolant, ``kernel.make_kernel``),
 and its sums of the averaged pulse are fixed-point integers added in a fixed order, so a run repeated
-gives the same bits. What it has no kernel for (precompression, damping and every contact law but the
-elastic power law, the aligned pulse, force sensors on the grid) is refused with an error that names the
-CPU backend.
+gives the same bits. What it has no kernel for (precompression, contacts that yield, the aligned pulse,
+force sensors on the grid) is refused with an error that names the CPU backend.
 
 Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, which installs
 ``numba-cuda``). Under ``NUMBA_ENABLE_CUDASIM=1`` the same kernels run in Numba's simulator on a CPU
@@ -54,7 +55,7 @@ def available() -> tuple[bool, str]:
 
 
 class CudaBackend(Backend):
-    """RKN4, DP5 and Verlet for elastic chains on an NVIDIA GPU; ``threads_per_chain`` chooses the layout (see
+    """RKN4, DP5 and Verlet for elastic chains, DP5 for damped ones, on an NVIDIA GPU; ``threads_per_chain`` chooses the layout (see
     :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp shuffles, the
     default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's integer
     reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
@@ -62,7 +63,8 @@ class CudaBackend(Backend):
     the device time of the integration and the reduction, synchronised, transfers excluded."""
 
     name = "cuda"
-    law_forms = ("power-law",)
+    #: The elastic power law, and the damped laws DP5 integrates (``kernel.make_kernel``'s ``damped``).
+    law_forms = ("power-law", "kuwabara-kono", "viscous")
     #: The integrators it has kernels for (``Integrator.name``).
     methods = ("rkn4", "dp5", "verlet")
     #: The methods a caller's default may pick on it: RKN4 alone, the one measured on a GPU
@@ -100,12 +102,13 @@ class CudaBackend(Backend):
 
     # ------------------------------------------------------------------ what it runs
     def check(self, integrator, chain) -> None:
-        """RKN4, DP5 or Verlet on an elastic (power-law), unloaded chain at rest ahead of the pulse; then
-        :meth:`Backend.check`. Each refusal names the CPU backend, which runs all of these."""
+        """RKN4, DP5 or Verlet on an elastic (power-law) chain, or DP5 on a damped one (Kuwabara-Kono or
+        viscous contacts), unloaded and at rest ahead of the pulse; then :meth:`Backend.check` (which refuses
+        RKN4 and Verlet for damped contacts). Each refusal names the CPU backend, which runs all of these."""
         cpu = "; use the CPU backend (backend='cpu')"
         if type(chain.contact).__dict__.get("form") not in self.law_forms:
-            raise ValueError(f"the cuda backend has no kernel for the contact law {chain.contact!r} (elastic power-law "
-                             f"contacts only){cpu}")
+            raise ValueError(f"the cuda backend has no kernel for the contact law {chain.contact!r} (elastic power-law, "
+                             f"Kuwabara-Kono viscoelastic and viscous contacts only){cpu}")
         if integrator.name not in self.methods:
             raise ValueError(f"the cuda backend runs RKN4, DP5 and Verlet (granchain.RKN4, granchain.DP5, "
                              f"granchain.Verlet), not {integrator.name}{cpu}")
@@ -116,20 +119,24 @@ class CudaBackend(Backend):
                              f"{chain.initial!r} does not{cpu}")
         super().check(integrator, chain)
 
-    def _kernel(self, M: int, method: str, fixed: bool):
+    def _kernel(self, M: int, method: str, fixed: bool, damped: bool):
         from .kernel import make_kernel
 
         L = self.threads_per_chain
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
-        key = (L, G, method, fixed)
+        key = (L, G, method, fixed, damped)
         if key not in self._kernels:
-            self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed)
+            self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed,
+                                             damped)
         return L, G, self._kernels[key]
 
     # ------------------------------------------------------------------ runs
-    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None):
+    def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None, history=None):
+        """:meth:`Backend.integrate` of one chain: a batch of one row on the GPU. ``history`` (a law with memory)
+        is refused by :meth:`check`: the GPU carries no per-contact state."""
         from ..kernels.records import (
+            INFO_DISSIPATED,
             INFO_EXIT,
             INFO_FROZEN_POTENTIAL,
             INFO_REJECTED,
@@ -139,12 +146,12 @@ class CudaBackend(Backend):
             INFO_WINDOW_START,
         )
 
+        self.check(integrator, chain)
         if sensed is not None and len(sensed):
             raise ValueError("the cuda backend records no contact forces on the grid (sensors); use the CPU backend "
                              "(backend='cpu')")
         if np.any(x != 0.0) or np.count_nonzero(v[1:]):
             raise ValueError("the cuda backend starts from rest with granule 1 struck; use the CPU backend (backend='cpu')")
-        self.check(integrator, chain)
         res = self._run(integrator, chain, chain.masses[None], chain.stiffness[None], np.array([v[0]]),
                         chain.observed, t_grid, np.array([float(t_max)]), stop_at_exit, controls, None)
         info = np.zeros(INFO_SIZE)
@@ -152,6 +159,7 @@ class CudaBackend(Backend):
         info[INFO_REJECTED] = res["n_rejected"][0]
         info[INFO_EXIT] = res["exit_time"][0]
         info[INFO_WINDOW_START], info[INFO_FROZEN_POTENTIAL] = res["window_start"][0], res["frozen_potential"][0]
+        info[INFO_DISSIPATED] = res["dissipated_energy"][0]
         x[:], v[:] = res["positions"][0], res["velocities"][0]
         grid_f = res["wall_force"][0] if res["wall_force"] is not None else np.zeros(t_grid.size)
         return (int(res["status"][0]), info, res["peak_velocity"][0], res["peak_time"][0], res["velocity"][0],
@@ -183,7 +191,7 @@ class CudaBackend(Backend):
         out["status"][:], out["n_steps"][:], out["t_end"][:] = res["status"], res["n_steps"], res["t_end"]
         out["energy_error"][:] = _energy_errors(first, masses, stiffness, initial_velocity, res)
         if "dissipated_energy" in out:
-            out["dissipated_energy"][:] = 0.0
+            out["dissipated_energy"][:] = res["dissipated_energy"]
         out["n_valid"][0] += int(np.count_nonzero(res["status"] == 0))
 
     def _run(self, integrator, chain, masses, stiffness, v0, observed, t_grid, t_max, stop_at_exit, controls,
@@ -208,10 +216,13 @@ class CudaBackend(Backend):
             fixed = ran.fixed_step is not None
             steps = (ran.rtol, ran.atol, ran.fixed_step if fixed else ran.first_step, ran.relaxed_lag or 0,
                      ran.relaxed_factor, ran.window_lag or 0)
+        law = chain.contact
+        damped = law.gamma > 0.0  # (a damped law with gamma = 0 is the elastic one)
         prm[:] = (*steps, controls.exit_margin, controls.peak_rtol, controls.max_steps, float(chain.n),
                   float(bool(stop_at_exit)), float(chain.boundary.wall), float(t_grid[-1]) if T else 0.0,
-                  float(pulse_end is not None))
-        L, G, kernel = self._kernel(M, ran.name, fixed)
+                  float(pulse_end is not None), float(law.gamma), float(type(law).__dict__.get("form") == "viscous"),
+                  float(bool(law.clamp)))
+        L, G, kernel = self._kernel(M, ran.name, fixed, damped)
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.
@@ -232,7 +243,7 @@ class CudaBackend(Backend):
             d_out = {k: cuda.device_array(s, dtype=np.float64) for k, s in shapes.items()}
             for k in ("status", "n_steps", "n_rejected", "window_start"):
                 d_out[k] = cuda.device_array(r, dtype=np.int64)
-            for k in ("t_end", "exit_time", "frozen_potential"):
+            for k in ("t_end", "exit_time", "frozen_potential", "dissipated_energy"):
                 d_out[k] = cuda.device_array(r, dtype=np.float64)
             d_out["positions"] = cuda.device_array((r, M), dtype=np.float64)
             d_out["velocities"] = cuda.device_array((r, M), dtype=np.float64)
@@ -273,7 +284,7 @@ class CudaBackend(Backend):
 #: give them (``peak_compression``: each contact's compression at its recorded peak, for the root screen).
 KERNEL_OUTPUTS = ("peak_velocity", "peak_time", "peak_force", "peak_force_time", "peak_compression", "velocity",
                   "wall_force", "status", "n_steps", "n_rejected", "t_end", "exit_time", "window_start",
-                  "frozen_potential", "positions", "velocities")
+                  "frozen_potential", "dissipated_energy", "positions", "velocities")
 
 
 _SUMS: dict = {}
@@ -296,7 +307,7 @@ def make_wall_sum_kernel_cached():
 
 
 def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
-    """(E_end - E_0) / E_0 per row (``kernels.forces.final_energy``): kinetic energy of every granule (a
+    """(E_end + E_dissipated - E_0) / E_0 per row (``kernels.forces.final_energy``): kinetic energy of every granule (a
     wall's left out; granules behind the trailing window keep the velocity they left with), the potential
     (c / n) delta^n (Eq. hertz-1) of the contacts still integrated at the end, and the potential the
     contacts behind the window held when they left it; E_0 = m_1 v_0^2 / 2."""
@@ -309,4 +320,4 @@ def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
     potential = np.sum(np.where(integrated, stiffness[:, : d.shape[1]] * d**n, 0.0), axis=1) / n + res["frozen_potential"]
     e0 = 0.5 * masses[:, 0] * v0 * v0
     with np.errstate(invalid="ignore"):
-        return (kinetic + potential - e0) / e0
+        return (kinetic + potential + res["dissipated_energy"] - e0) / e0

@@ -83,38 +83,144 @@ def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right
 
 
 @cuda.jit(device=True)
-def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_left, c_right, inv_m, n):
-    """First theta in [0, 1] where the followed function stops being positive (``kernels.dense.first_root``:
-    Illinois while the bracket has a strictly negative end, bisection while it ends on an exact zero):
-    ``what`` 0, granule k's acceleration (its velocity maximum); 1, contact k's relative velocity (its
-    compression maximum)."""
+def bracket_theta(lo, hi, f_lo, f_hi):
+    """The next trial of :func:`root`'s search in the bracket [lo, hi] (values f_lo > 0, f_hi <= 0): regula
+    falsi while f_hi < 0, else (an exact zero at hi: a contact that opened) bisection."""
+    if f_hi < 0.0:
+        theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        if not (lo < theta < hi):
+            theta = 0.5 * (lo + hi)
+        return theta
+    return 0.5 * (lo + hi)
+
+
+@cuda.jit(device=True)
+def bracket_update(f, theta, lo, hi, f_lo, f_hi, side):
+    """The bracket after the trial ``theta`` gave ``f`` (Illinois: the end kept twice has its value halved)."""
+    if f > 0.0:
+        if side == -1:
+            f_hi *= 0.5
+        return theta, hi, f, f_hi, -1
+    if side == 1:
+        f_lo *= 0.5
+    return lo, theta, f_lo, f, 1
+
+
+# -- Contacts that dissipate (DP5 only: their forces read the velocities) -----------------------------------
+# ``law`` is the tuple (n, gamma, viscous, clamp) of floats: the exponent, the damping constant, 1.0 for the
+# viscous law of Rosas et al. (else Kuwabara-Kono's) and 1.0 where the force is clamped at 0 (``records.Params``).
+
+@cuda.jit(device=True)
+def law_force(d, w, c, law):
+    """``kernels.forces.law_force`` of a damped law: for compression ``d`` > 0 closing at the rate ``w``, Kuwabara
+    & Kono's c d^(n-2) (d + gamma w) or the viscous c d^(n-1) + gamma w of Rosas et al., clamped at 0 when
+    ``clamp``; 0 for d <= 0 and for a contact of stiffness 0 (none: the edge of the trailing window)."""
+    n = law[0]
+    gamma = law[1]
+    if d <= 0.0 or c == 0.0:
+        return 0.0
+    if law[2] > 0.0:
+        f = contact_force(d, c, n) + gamma * w
+    elif n == 2.5:
+        f = c * math.sqrt(d) * (d + gamma * w)
+    elif n == 2.0:
+        f = c * (d + gamma * w)
+    else:
+        f = c * d ** (n - 2.0) * (d + gamma * w)
+    if law[3] > 0.0:
+        return max(f, 0.0)
+    return f
+
+
+@cuda.jit(device=True)
+def force_rate(d, w, dw, c, law):
+    """``kernels.forces.force_rate``: d/dt of :func:`law_force` (``dw`` the relative acceleration), where it falls
+    from + to - the force peaks; 0 where the force is <= 0."""
+    if d <= 0.0 or law_force(d, w, c, law) <= 0.0:
+        return 0.0
+    n = law[0]
+    g = law[1]
+    if law[2] > 0.0:
+        if n == 2.5:
+            return c * 1.5 * math.sqrt(d) * w + g * dw
+        return c * (n - 1.0) * d ** (n - 2.0) * w + g * dw
+    if n == 2.5:
+        r = math.sqrt(d)
+        return c * (1.5 * r * w + g * (0.5 * w * w / r + r * dw))
+    return c * ((n - 1.0) * d ** (n - 2.0) * w + g * ((n - 2.0) * d ** (n - 3.0) * w * w + d ** (n - 2.0) * dw))
+
+
+@cuda.jit(device=True)
+def law_power(d, w, f, c, law):
+    """The power a damped contact takes from the motion, (F - F_elastic) w for d > 0 (``forces.accelerations``)."""
+    if d > 0.0:
+        return (f - contact_force(d, c, law[0])) * w
+    return 0.0
+
+
+@cuda.jit(device=True)
+def damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, law):
+    """:func:`dense_acceleration` by a damped law: the forces read the dense-output velocities too."""
+    xk = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
+    vk = dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
+    left = 0.0
+    right = 0.0
+    if k > 0:
+        left = law_force(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk,
+                         dense_v(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - vk, c_left, law)
+    if k < M - 1:
+        right = law_force(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
+                          vk - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), c_right, law)
+    return (left - right) * inv_m
+
+
+@cuda.jit(device=True)
+def dense_force_rate(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, c_after, inv_m0, inv_m1, law):
+    """``kernels.dense.dense_force_rate``: the rate of contact k's force on the dense output, from the damped
+    accelerations of granules k and k + 1 (``c_before``: contact k - 1's stiffness, 0 at the window's edge;
+    ``c_after``: contact k + 1's, 0 past the chain)."""
+    dw = (damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, inv_m0, law)
+          - damped_acceleration(k + 1, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_k, c_after, inv_m1, law))
+    d = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
+    w = dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
+    return force_rate(d, w, dw, c_k, law)
+
+
+# -- The root search on the dense output --------------------------------------------------------------------
+
+#: What :func:`root` follows across a step (``kernels.dense``'s ROOT_*): a granule's acceleration (its velocity
+#: maximum), a contact's relative velocity (its compression maximum), a granule's acceleration by a damped law,
+#: or the rate of a damped contact's force (which peaks before the compression does).
+ROOT_ACCELERATION = 0
+ROOT_APPROACH = 1
+ROOT_DAMPED_ACCELERATION = 2
+ROOT_FORCE_RATE = 3
+
+
+@cuda.jit(device=True)
+def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_before, c_k, c_after, inv_m0, inv_m1, law):
+    """First theta in [0, 1] where the followed function ``what`` (the ROOT_* above; f_lo > 0 its value at 0,
+    f_hi <= 0 at 1) stops being positive, on the dense output (``kernels.dense.first_root``: Illinois while the
+    bracket has a strictly negative end, bisection while it ends on an exact zero). For granule k:
+    ``c_before``, ``c_k`` its left and right contacts' stiffness (0 for none), ``inv_m0`` its inverse mass; for
+    the rate of contact k's force also ``c_after`` (contact k + 1's) and ``inv_m1`` (granule k + 1's); ``law``
+    the contacts' (n, gamma, viscous, clamp)."""
     lo = 0.0
     hi = 1.0
     side = 0
     for _ in range(200):
-        if f_hi < 0.0:
-            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            if not (lo < theta < hi):
-                theta = 0.5 * (lo + hi)
-        else:
-            theta = 0.5 * (lo + hi)
-        if what == 0:
-            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_left, c_right, inv_m, n)
-        else:
+        theta = bracket_theta(lo, hi, f_lo, f_hi)
+        if what == ROOT_ACCELERATION:
+            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law[0])
+        elif what == ROOT_APPROACH:
             f = (dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                  - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta))
-        if f > 0.0:
-            lo = theta
-            f_lo = f
-            if side == -1:
-                f_hi *= 0.5
-            side = -1
+        elif what == ROOT_DAMPED_ACCELERATION:
+            f = damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law)
         else:
-            hi = theta
-            f_hi = f
-            if side == 1:
-                f_lo *= 0.5
-            side = 1
+            f = dense_force_rate(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, c_after, inv_m0, inv_m1,
+                                 law)
+        lo, hi, f_lo, f_hi, side = bracket_update(f, theta, lo, hi, f_lo, f_hi, side)
         if hi - lo < 1e-14:
             break
     return hi

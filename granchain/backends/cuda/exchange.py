@@ -12,18 +12,22 @@ from collections import namedtuple
 from numba import cuda, int64
 
 from ..kernels.window import CUT_FORCE
-from .device import FULL_MASK, contact_force, warp_any, warp_last
+from .device import FULL_MASK, contact_force, law_force, law_power, warp_any, warp_last
 
 #: The device functions of a layout, by name.
 Exchange = namedtuple("Exchange", ["sync", "group_max", "group_any", "group_last", "group_sum", "right_neighbour",
                                    "forces", "cut_candidates"])
 
 
-def make_exchange(L: int, G: int, shuffle: bool, votes: bool) -> Exchange:
+def make_exchange(L: int, G: int, shuffle: bool, votes: bool, damped: bool = False) -> Exchange:
     """The exchange device functions for ``L`` threads per chain and ``G`` granules per thread (constants of
     their code: ``L = 1`` has no barriers), by warp shuffles (``shuffle``, ``L`` = 32) or shared memory, with
-    the integer reductions by warp votes (``votes``, with ``shuffle``) or by maxima."""
+    the integer reductions by warp votes (``votes``, with ``shuffle``) or by maxima; ``damped``: forces that
+    read the velocities too (the stage exchange's shared arrays then hold 2 L G values: positions, then
+    velocities)."""
     GROUP = L > 1
+    DAMPED = bool(damped)
+    MMAX = L * G
     SHUFFLE = bool(shuffle)
     VOTES = SHUFFLE and bool(votes)
 
@@ -89,26 +93,59 @@ def make_exchange(L: int, G: int, shuffle: bool, votes: bool) -> Exchange:
         return shared[j] if j < M else 0.0
 
     @cuda.jit(device=True)
-    def forces(xs, own, M, lo, bx, c_left, c_right, inv_m, n, acc):
+    def forces(xs, us, own, M, lo, bx, c_left, c_right, inv_m, law, acc):
         """acc[s] = the acceleration of owned granule s at the positions ``xs``: every thread of the group
         calls it (the positions cross thread boundaries through ``bx``, or by shuffles). Granules behind the
         trailing window (i < lo) are not integrated (acceleration 0: they continue ballistically) and the
-        contact at its edge is dropped (``kernels.window``)."""
+        contact at its edge is dropped (``kernels.window``). ``law``: the contacts' (n, gamma, viscous, clamp).
+
+        ``damped`` (a constant of the code): the forces of a damped law (``device.law_force``) read the stage
+        velocities ``us`` too (through ``bx[MMAX:]``, or by shuffles), and the function returns this thread's
+        share of the power the contacts take from the motion (its granules' right contacts from the window's
+        start on: ``kernels.forces.accelerations``); elastic, it reads no velocities and returns 0."""
+        n = law[0]
+        ul = 0.0
+        ur = 0.0
         if SHUFFLE:
             xl = cuda.shfl_up_sync(FULL_MASK, xs[G - 1], 1)
             xr = cuda.shfl_down_sync(FULL_MASK, xs[0], 1)
+            if DAMPED:
+                ul = cuda.shfl_up_sync(FULL_MASK, us[G - 1], 1)
+                ur = cuda.shfl_down_sync(FULL_MASK, us[0], 1)
         else:
             for s in range(G):
                 i = own + s
                 if i < M:
                     bx[i] = xs[s]
+                    if DAMPED:
+                        bx[MMAX + i] = us[s]
             sync()
+        power = 0.0
         for s in range(G):
             i = own + s
             if i < M:
                 left = 0.0
                 right = 0.0
-                if SHUFFLE:
+                if DAMPED:
+                    if SHUFFLE:
+                        x_left = xs[s - 1] if s > 0 else xl
+                        u_left = us[s - 1] if s > 0 else ul
+                        x_right = xs[s + 1] if s < G - 1 else xr
+                        u_right = us[s + 1] if s < G - 1 else ur
+                    else:
+                        x_left = bx[i - 1] if i > 0 else 0.0
+                        u_left = bx[MMAX + i - 1] if i > 0 else 0.0
+                        x_right = bx[i + 1] if i < M - 1 else 0.0
+                        u_right = bx[MMAX + i + 1] if i < M - 1 else 0.0
+                    if i > lo:
+                        left = law_force(x_left - xs[s], u_left - us[s], c_left[s], law)
+                    if i < M - 1:
+                        d = xs[s] - x_right
+                        w = us[s] - u_right
+                        right = law_force(d, w, c_right[s], law)
+                        if i >= lo:
+                            power += law_power(d, w, right, c_right[s], law)
+                elif SHUFFLE:
                     if i > lo:
                         left = contact_force((xs[s - 1] if s > 0 else xl) - xs[s], c_left[s], n)
                     if i < M - 1:
@@ -119,6 +156,7 @@ def make_exchange(L: int, G: int, shuffle: bool, votes: bool) -> Exchange:
                     if i < M - 1:
                         right = contact_force(xs[s] - bx[i + 1], c_right[s], n)
                 acc[s] = (left - right) * inv_m[s] if i >= lo else 0.0
+        return power
 
     @cuda.jit(device=True)
     def cut_candidates(target, own, lo, M, xs, xr, c_right, n):
