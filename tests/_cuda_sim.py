@@ -195,8 +195,28 @@ def unavailable() -> dict:
     return {"error": None}
 
 
+def damped_ensemble(threads: int, store: str) -> dict:
+    """``run_ensemble`` of a damped family (``RandomDecorated(3)``, Kuwabara-Kono contacts, both chain kinds, 3
+    realisations) with the GPU backend, written to ``store`` and read back, and the same on the CPU in memory: each
+    one's integrators, dissipated energies, energy errors and peak velocities."""
+    import xarray as xr
+
+    import granchain as gc
+    from granchain.backends.cuda import CudaBackend
+
+    family = gc.RandomDecorated(3, contact=gc.Viscoelastic(0.05))
+    kw = {"realizations": 3, "chains": "both", "progress": False, "pulse_window": "full"}
+    gc.run_ensemble(family, out=store, backend=CudaBackend(threads), **kw)
+    res = {}
+    for name, ds in (("cuda", xr.open_dataset(store, engine="zarr")), ("cpu", gc.run_ensemble(family, out=None, **kw))):
+        res[name] = {"integrator": str(ds.attrs.get("integrator")), "backend": ds.attrs.get("backend"),
+                     **{k: ds[k].transpose("chain", "realization", ...).values.tolist()
+                        for k in ("dissipated_energy", "energy_error", "peak_velocity", "status")}}
+    return res
+
+
 CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "votes": votes, "refusals": refusals,
-          "unavailable": unavailable}
+          "unavailable": unavailable, "damped_ensemble": damped_ensemble}
 
 if __name__ == "__main__":
     name, args = sys.argv[1], [json.loads(a) for a in sys.argv[2:]]

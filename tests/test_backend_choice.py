@@ -271,6 +271,21 @@ def test_a_backend_that_runs_dp5_but_defaults_to_rkn4_gets_rkn4_unless_dp5_is_as
     assert {k: i.name for k, i in both.chain_integrators.items()} == {"decorated": "rkn4", "effective": "dp5"}
 
 
+def test_contacts_that_dissipate_keep_each_kinds_own_default_on_a_backend_that_defaults_to_rkn4():
+    """RKN4 cannot integrate damped contacts, so a backend that defaults to it (the GPU) leaves each chain kind
+    the CPU's own default for them, DP5 at that kind's tolerances (the effective chains' are tighter than the
+    decorated chains'), so that the two backends integrate the same problem. Negative control: an elastic
+    family's effective chains are switched to RKN4 there."""
+    import granchain as gc
+
+    damped = gc.RandomDecorated(4, contact=gc.Viscoelastic(0.05))
+    cpu = EnsembleSpec(damped, realizations=4).chain_integrators
+    gpu = EnsembleSpec(damped, realizations=4, backend=DefaultsToRkn()).chain_integrators
+    assert gpu == cpu
+    assert {i.name for i in gpu.values()} == {"dp5"} and gpu["effective"].rtol < gpu["decorated"].rtol
+    assert EnsembleSpec(FAMILY, realizations=4, backend=DefaultsToRkn()).chain_integrators["effective"].name == "rkn4"
+
+
 def test_a_design_on_a_backend_without_its_default_method_uses_rkn4():
     from granchain.design import TaperedSpace
     from granchain.design.evaluate import BatchEvaluator
@@ -285,7 +300,8 @@ def test_a_design_on_a_backend_without_its_default_method_uses_rkn4():
 
 def test_pulse_backend_cpu_is_the_default_and_cuda_picks_rkn4(capsys):
     """``granchain pulse --backend cpu`` prints what the default prints; with ``--backend cuda`` and no
-    ``--integrator`` the integrator is RKN4 (the GPU's default, the method measured there), not DP5."""
+    ``--integrator`` the integrator is RKN4 (the GPU's default, the method measured there), not DP5, except for
+    contacts that dissipate."""
     import argparse
 
     from granchain.cli import main
@@ -299,3 +315,4 @@ def test_pulse_backend_cpu_is_the_default_and_cuda_picks_rkn4(capsys):
     assert _integrator(args).name == "rkn4"
     assert _integrator(argparse.Namespace(**{**vars(args), "backend": "cpu"})).name == "dp5"
     assert _integrator(argparse.Namespace(**{**vars(args), "integrator": "dp5"})).name == "dp5"
+    assert _integrator(args, conservative=False).name == "dp5"  # damped contacts: RKN4 cannot integrate them

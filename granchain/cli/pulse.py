@@ -70,7 +70,7 @@ def add_parser(subparsers) -> None:
     # the lists of integrators and of the ones each setting applies to come from the registry
     p.add_argument("--integrator", default=None, metavar="{" + ",".join(sorted(INTEGRATORS)) + "}",
                    help=f"one of {', '.join(f'{name} ({INTEGRATOR_NOTES[name]})' if name in INTEGRATOR_NOTES else name for name in sorted(INTEGRATORS))} "
-                        "(default dp5; rkn4 with --backend cuda, the GPU's default)")
+                        "(default dp5; rkn4 with --backend cuda, the GPU's default, for elastic contacts)")
     p.add_argument("--rtol", type=float, help=f"relative tolerance ({', '.join(taking('rtol'))})")
     p.add_argument("--atol", type=float, help=f"absolute tolerance ({', '.join(taking('atol'))})")
     p.add_argument("--dt", type=float, help=f"time step ({', '.join(taking('dt'))})")
@@ -87,10 +87,13 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _integrator(args):
+def _integrator(args, conservative: bool = True):
+    """The integrator asked for, else DP5 (``simulate``'s default), or on the GPU RKN4 (its default, measured there)
+    where the contacts are ``conservative`` (RKN4 integrates forces of positions only; damped contacts keep DP5)."""
     from .. import INTEGRATORS
 
-    name = args.integrator if args.integrator is not None else ("rkn4" if backend_of(args) == "cuda" else "dp5")
+    gpu_default = backend_of(args) == "cuda" and conservative
+    name = args.integrator if args.integrator is not None else ("rkn4" if gpu_default else "dp5")
     cls = INTEGRATORS.get(name.lower())
     if cls is None:
         raise ValueError(f"unknown integrator {name!r}; choose one of {sorted(INTEGRATORS)}")
@@ -177,7 +180,7 @@ def run(args) -> int:
         t_end = passage_time(chain)
         grid = np.arange(0.0, t_end, 0.01)
     plot = pulse_plot_request(args, chain, grid, sensors)  # --plot: checked before the run; the grid (and gauges) it needs
-    result = gc.simulate(chain, _integrator(args), t_grid=grid if plot is None else plot.grid,
+    result = gc.simulate(chain, _integrator(args, chain.contact.conservative), t_grid=grid if plot is None else plot.grid,
                          sensors=sensors if plot is None else plot.sensors, backend=backend_of(args))
     # Decorated (and effective) chains are reported by large-granule index k = 1..N
     # (decorated chain index 2k - 1); a chain from --radii by its own index.

@@ -129,11 +129,13 @@ class EnsembleSpec:
                          for c in self.chains}
             # A backend that defaults to fewer methods (the GPU: RKN4, the one measured there) gets the
             # light-granule chains' default, RKN4, for the kinds whose default it does not: valid for every
-            # elastic chain.
+            # elastic chain. Contacts that dissipate keep each kind's own default (DP5 at its tolerances: RKN4
+            # cannot integrate them, and the light-granule chains' DP5 is looser than the smooth chains').
             methods = _backend.default_methods(_backend.resolve(_backend.checked(self.backend)))
             if given is None and methods is not None:
                 fallback = default_integrator(LIGHT_GRANULES, conservative=self.family.model.conservative, windowed=windowed)
-                per_chain = {c: (i if i.name in methods else fallback) for c, i in per_chain.items()}
+                if fallback.name in methods:
+                    per_chain = {c: (i if i.name in methods else fallback) for c, i in per_chain.items()}
         law = self.family.contact_law
         for c, integ in per_chain.items():  # refused here, before a store exists
             if integ.needs_conservative_forces and not law.conservative:
