@@ -55,10 +55,10 @@ def available() -> tuple[bool, str]:
 
 
 class CudaBackend(Backend):
-    """RKN4, DP5 and Verlet for elastic chains, DP5 for damped ones, on an NVIDIA GPU; ``threads_per_chain`` chooses the layout (see
-    :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp shuffles, the
-    default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's integer
-    reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
+    """RKN4, DP5 and Verlet for elastic chains, DP5 for damped ones, on an NVIDIA GPU; ``threads_per_chain``
+    chooses the layout (see :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp
+    shuffles, the default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's
+    integer reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
     ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch:
     the device time of the integration and the reduction, synchronised, transfers excluded."""
 

@@ -159,6 +159,15 @@ def law_power(d, w, f, c, law):
 
 
 @cuda.jit(device=True)
+def dense_law_force(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c, law):
+    """``kernels.dense.dense_force`` of a damped law: contact k's force (stiffness ``c``) at theta = t, from the
+    dense output's compression and its rate."""
+    return law_force(dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
+                     dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
+                     c, law)
+
+
+@cuda.jit(device=True)
 def damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, law):
     """:func:`dense_acceleration` by a damped law: the forces read the dense-output velocities too."""
     xk = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)

@@ -54,6 +54,7 @@ from .device import (
     ROOT_FORCE_RATE,
     contact_force,
     cut_target,
+    dense_law_force,
     dense_v,
     dense_x,
     falls,
@@ -452,10 +453,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                              c_left[s] if i > lo else 0.0, c_right[s],
                                              stiffness[r, i + 1] if i < M - 2 else 0.0, inv_m[s], 1.0 / masses[r, i + 1],
                                              law)
-                                fp = law_force(dense_x(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                               - dense_x(i + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta),
-                                               dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                               - dense_v(i + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), c_right[s], law)
+                                fp = dense_law_force(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law)
                                 if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                                     peak_f[r, i] = fp
                                     peak_ft[r, i] = t + theta * h
@@ -496,11 +494,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                 grid_v[r, g, q] = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                         if wall and i == M - 2:
                             if DAMPED:
-                                grid_f[r, g] = law_force(
-                                    dense_x(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                    - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta),
-                                    dense_v(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                    - dense_v(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), c_right[s], law)
+                                grid_f[r, g] = dense_law_force(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law)
                             elif VERLET:
                                 grid_f[r, g] = contact_force(
                                     hermite3(hx0[M - 2], hv0[M - 2], hx1[M - 2], hv1[M - 2], h, theta)
