@@ -45,6 +45,10 @@ the same run:
    ratio, and the largest differences of the two backends' peak velocities, peak times and dissipated
    energies. Not a target: it shows what dissipative ensembles cost on the GPU.
 
+7. ``[7 loaded]``: the same set precompressed by F0 = 0.01 against a fixed wall (``RandomDecorated(...,
+   static_force=0.01, wall=True)``: every chain runs to its time limit, the loaded contacts never open), as part 6
+   measures it, with ``[7 agree]``: the peaks' and the wall's peak force's largest differences. Not a target.
+
 ``[summary]``: decorated integration <= 1.5 s; >= 8x the peer; >= 20x CPU-16; reproduce integration
 <= 10 s, wall <= 60 s; CPU >= 13x on 16 threads; each PASS/FAIL with its number (MISSING where the
 part that measures it failed or was skipped).
@@ -92,6 +96,9 @@ ROOT = Path(__file__).resolve().parents[1]
 PEAK_V_RTOL = 1e-6
 PEAK_T_ATOL = 1e-5
 
+#: Part 7's precompression F0 (rescaled: a fiftieth of the pulse's peak contact force, ~0.5).
+LOAD = 0.01
+
 #: The targets of the summary: (label, comparison, threshold).
 TARGETS = {
     "decorated integration": ("<=", 1.5, "s"),
@@ -116,7 +123,7 @@ class Sizes:
     sweep: int = 1_000
     threads: tuple = (1, 2, 4, 8, 16)
     agree: int = 1_000
-    damped: int = 3_000
+    damped: int = 3_000  # (and the precompressed set's)
     peer_check: int = 100
     peer_dt: float = 2.5e-4
     peer_t_end: float | None = None  # None: the ensemble's time grid end
@@ -666,41 +673,57 @@ def part_agree(run: Run) -> None:
 
 
 def part_damped(run: Run) -> None:
-    import numba
-
     import granchain as gc
+
+    law = gc.Viscoelastic.from_restitution(0.9)
+    real_contacts(run, "6 damped", gc.RandomDecorated(run.sizes.n_large, contact=law),
+                  f"decorated N={run.sizes.n_large}, {law.label()} (restitution 0.9)")
+
+
+def part_loaded(run: Run) -> None:
+    import granchain as gc
+
+    real_contacts(run, "7 loaded", gc.RandomDecorated(run.sizes.n_large, static_force=LOAD, wall=True),
+                  f"decorated N={run.sizes.n_large}, precompressed F0 = {LOAD:g}, wall")
+
+
+def real_contacts(run: Run, key: str, family, label: str) -> None:
+    """Parts 6 and 7: ``family`` (a chain of real contacts) on the GPU backend and on the CPU's 16 threads, each with
+    its default method, ``run.sizes.damped`` realisations: the wall times, their ratio, and the largest differences
+    of the two backends' peaks and of the dissipated energy (damped) or the wall's peak force (against a wall)."""
+    import numba
 
     s = run.sizes
     R = s.damped
-    if not run.fits("6 damped", 40.0):
+    if not run.fits(key, 40.0):
         return
-    law = gc.Viscoelastic.from_restitution(0.9)
-    family = gc.RandomDecorated(s.n_large, contact=law)
-    label = f"decorated N={s.n_large}, {law.label()} (restitution 0.9)"
+    part = key.split()[0]
     backend = gpu_backend(s.reference, run.stub)
     t0 = time.perf_counter()
     ensemble(run, s.warmup, 0, "decorated", backend=backend, chunk_size=s.warmup, family=family)
-    run.line("6 compile", f"{label}: warm-up of {s.warmup} realisations {time.perf_counter() - t0:.2f} s{run.tag}")
+    run.line(f"{part} compile", f"{label}: warm-up of {s.warmup} realisations {time.perf_counter() - t0:.2f} s{run.tag}")
     gpu, kernel, wall, timings = gpu_run(run, backend, "decorated", R, family=family)
     threads = max(t for t in s.threads if t <= numba.config.NUMBA_NUM_THREADS)  # (16 on the device machine)
-    ensemble(run, 2 * threads, 0, "decorated", threads=threads, family=family)  # (compiles the CPU's damped DP5)
+    ensemble(run, 2 * threads, 0, "decorated", threads=threads, family=family)  # (compiles the CPU's kernel for it)
     t0 = time.perf_counter()
     cpu = ensemble(run, R, 0, "decorated", threads=threads, family=family)
     cpu_wall = time.perf_counter() - t0
-    run.line("6 damped", f"{label}: GPU L={s.reference} {R:,} realisations ({integrator_of(gpu)}): integration {kernel:.3f} s, "
-                         f"wall {wall:.3f} s; CPU {threads} threads ({integrator_of(cpu)}): wall {cpu_wall:.3f} s; "
-                         f"CPU-{threads} wall / GPU wall = {cpu_wall / wall:.2f}x{run.tag}")
+    run.line(key, f"{label}: GPU L={s.reference} {R:,} realisations ({integrator_of(gpu)}): integration {kernel:.3f} s, "
+                  f"wall {wall:.3f} s; CPU {threads} threads ({integrator_of(cpu)}): wall {cpu_wall:.3f} s; "
+                  f"CPU-{threads} wall / GPU wall = {cpu_wall / wall:.2f}x{run.tag}")
     gv, gt, gok = peaks(gpu)
     cv, ct, cok = peaks(cpu)
     ok, which = compared(gok, cok, gv, cv)
+    name = "dissipated_energy" if family.contact is not None else "peak_wall_force"
     with np.errstate(divide="ignore", invalid="ignore"):
         dv = np.abs(gv / cv - 1.0)[ok]
-        de = np.abs(gpu["dissipated_energy"].isel(chain=0).values / cpu["dissipated_energy"].isel(chain=0).values - 1.0)[ok]
+        dq = np.abs(gpu[name].isel(chain=0).values / cpu[name].isel(chain=0).values - 1.0)[ok]
     dt = np.abs(gt - ct)[ok]
-    run.line("6 agree", f"{label} ({which}): largest relative peak-velocity difference {worst(dv):.2e}, largest peak-time "
-                        f"difference {worst(dt):.2e}, largest relative difference of the dissipated energy {worst(de):.2e} "
-                        f"(mean dissipated {float(np.nanmean(cpu['dissipated_energy'].values)):.4g} of the impulse's 0.5)"
-                        f"{run.tag}")
+    what = (f"the dissipated energy {worst(dq):.2e} (mean dissipated {float(np.nanmean(cpu[name].values)):.4g} of the "
+            f"impulse's 0.5)" if name == "dissipated_energy" else
+            f"the wall's peak force {worst(dq):.2e} (mean {float(np.nanmean(cpu[name].values)):.4g})")
+    run.line(f"{part} agree", f"{label} ({which}): largest relative peak-velocity difference {worst(dv):.2e}, largest "
+                              f"peak-time difference {worst(dt):.2e}, largest relative difference of {what}{run.tag}")
 
 
 def summary(run: Run) -> None:
@@ -718,7 +741,7 @@ def summary(run: Run) -> None:
 
 
 PARTS = {1: ("gpu", part_gpu), 2: ("peer", part_peer), 3: ("cpu", part_cpu), 4: ("reproduce", part_reproduce),
-         5: ("agree", part_agree), 6: ("damped", part_damped)}
+         5: ("agree", part_agree), 6: ("damped", part_damped), 7: ("loaded", part_loaded)}
 
 
 def main(argv=None) -> int:
@@ -727,7 +750,8 @@ def main(argv=None) -> int:
                                                          "checks the script, measures nothing")
     ap.add_argument("--stub", action="store_true", help="a stand-in for the CUDA backend (the CPU ensemble, timed): "
                                                         "automatic with --smoke where granchain.backends.cuda is missing")
-    ap.add_argument("--parts", default="1,2,3,4,5,6", help="which parts to run, comma-separated (default all: 1,2,3,4,5,6)")
+    ap.add_argument("--parts", default="1,2,3,4,5,6,7", help="which parts to run, comma-separated (default all: "
+                                                          "1,2,3,4,5,6,7)")
     ap.add_argument("--layouts", default=None, help="part 1's layouts, comma-separated: threads per chain, then "
                                                     "optionally /shuffle or /shared, /REGS (a register cap) and "
                                                     "/butterfly (no warp votes); default "
@@ -738,9 +762,9 @@ def main(argv=None) -> int:
     try:
         parts = tuple(sorted({int(p) for p in args.parts.split(",") if p.strip()}))
     except ValueError:
-        ap.error(f"--parts must be part numbers 1-6 separated by commas, got {args.parts!r}")
+        ap.error(f"--parts must be part numbers 1-7 separated by commas, got {args.parts!r}")
     if not parts or any(p not in PARTS for p in parts):
-        ap.error(f"--parts must be part numbers 1-6 separated by commas, got {args.parts!r}")
+        ap.error(f"--parts must be part numbers 1-7 separated by commas, got {args.parts!r}")
     sizes = SMOKE if args.smoke else FULL
     if args.budget is not None:
         if not args.budget > 0:

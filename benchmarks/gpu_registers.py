@@ -131,14 +131,14 @@ def signature():
 
 
 def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxas: str, fixed: bool = False,
-           damped: bool = False) -> dict:
+           damped: bool = False, precompressed: bool = False) -> dict:
     """Compile one kernel to PTX (NVVM) and assemble it (ptxas -v): its resources and digest."""
     from numba import cuda
 
     from granchain.backends.cuda import BLOCK_THREADS
     from granchain.backends.cuda.kernel import make_kernel
 
-    kernel = make_kernel(L, G, cap, exchange == "shuffle", exchange == "shuffle", method, fixed, damped)
+    kernel = make_kernel(L, G, cap, exchange == "shuffle", exchange == "shuffle", method, fixed, damped, precompressed)
     ptx, _ = cuda.compile_ptx(kernel.py_func, signature(), cc=tuple(cc))
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "kernel.ptx")
@@ -156,9 +156,10 @@ def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxa
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cc", default="9.0", help="compute capability, e.g. 9.0 (H100, H200) or 8.0 (A100); default 9.0")
-    ap.add_argument("--methods", default="rkn4,dp5,verlet,dp5-damped",
-                    help="methods, comma-separated; dp5-damped: DP5 for contacts that dissipate (default "
-                         "rkn4,dp5,verlet,dp5-damped)")
+    ap.add_argument("--methods", default="rkn4,dp5,verlet,dp5-damped,rkn4-precompressed",
+                    help="methods, comma-separated; a suffix -damped: for contacts that dissipate (DP5 only), "
+                         "-precompressed: for precompressed chains, both in that order (default "
+                         "rkn4,dp5,verlet,dp5-damped,rkn4-precompressed)")
     ap.add_argument("--caps", default="168,128,96", help="register caps tried on the default layout (default 168,128,96)")
     args = ap.parse_args(argv)
     try:
@@ -186,7 +187,8 @@ def main(argv=None) -> int:
     for method, L, exchange, G, cap in cases:
         if method not in methods:
             continue
-        r = report(method.removesuffix("-damped"), L, exchange, G, cap, cc, ptxas, damped=method.endswith("-damped"))
+        name, damped, precompressed = method.partition("-")[0], "-damped" in method, method.endswith("-precompressed")
+        r = report(name, L, exchange, G, cap, cc, ptxas, damped=damped, precompressed=precompressed)
         base = r if base is None else base
         print(f"[registers sm_{cc[0]}{cc[1]}] {method} L={L} {exchange} G={G} cap {cap or 'none'}: "
               f"{r['registers']} registers, spills {r['spill_stores']} B stored / {r['spill_loads']} B loaded, "

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import warnings
 
 import numpy as np
 from numba import cuda
@@ -67,33 +68,36 @@ def contact_of(spec: str | None):
 
 
 def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str = "decorated", pulse_end=None,
-              integrator: str = "decorated", contact: str | None = None) -> dict:
-    """``integrator``: see :func:`integrator_of`; ``contact``: :func:`contact_of`."""
+              integrator: str = "decorated", contact: str | None = None, load: float = 0.0) -> dict:
+    """``integrator``: see :func:`integrator_of`; ``contact``: :func:`contact_of`; ``load``: a precompression F0 (such
+    a chain runs to its time limit, here ``t_end``)."""
     from granchain.solve.integrators import RunControls
 
     masses, stiffness, n, v0, observed, contacts = batch(n_large, realizations, kind)
     t_grid = np.arange(0.0, t_end, 0.5)
     out = outputs(realizations, observed.size, contacts.size, t_grid.size)
     law = contact_of(contact)
+    model = {**({} if law is None else {"contact": law}), **({"static_force": load} if load else {})}
     backend.integrate_batch(integrator_of(integrator), masses, stiffness, n, v0, observed, contacts, t_grid=t_grid,
-                            t_max=200.0, controls=RunControls(), scale=2.0**30, out=out, pulse_end=pulse_end,
-                            model=None if law is None else {"contact": law})
+                            t_max=t_end if load else 200.0, controls=RunControls(), scale=2.0**30, out=out,
+                            pulse_end=pulse_end, model=model or None)
     return {k: a.tolist() for k, a in out.items() if k != "lags"}
 
 
 def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end: float, windows: bool,
             repeat: bool = False, votes: bool = True, kind: str = "decorated", integrator: str = "decorated",
-            contact: str | None = None) -> dict:
+            contact: str | None = None, load: float = 0.0) -> dict:
     """The CUDA backend and the CPU's Numba backend on the same batch: every per-realisation result and sum
     (``repeat``: the GPU run twice, ``"again"`` the second, with ``votes`` negated where the exchange is by
     shuffles (the shuffle trees against the warp votes: the same results); else ``"again"`` is None).
-    ``kind``: the chains; ``integrator``: whose default method, ``contact``: their law (``run_batch``)."""
+    ``kind``: the chains; ``integrator``: whose default method, ``contact``: their law, ``load``: their precompression
+    (``run_batch``)."""
     from granchain.backends import get_backend
     from granchain.backends.cuda import CudaBackend
 
     ends = np.linspace(6.0, t_end, n_large) if windows else None  # averaged-pulse windows closing one by one
     gpu = CudaBackend(threads, exchange=exchange, votes=votes)
-    kw = {"pulse_end": ends, "kind": kind, "integrator": integrator, "contact": contact}
+    kw = {"pulse_end": ends, "kind": kind, "integrator": integrator, "contact": contact, "load": load}
     first = run_batch(gpu, n_large, realizations, t_end, **kw)
     other = CudaBackend(threads, exchange=exchange, votes=not votes) if exchange == "shuffle" else gpu
     again = run_batch(other, n_large, realizations, t_end, **kw) if repeat else None
@@ -101,14 +105,17 @@ def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end:
     return {"cuda": first, "again": again, "cpu": cpu}
 
 
-def versus_dop853(threads: int, wall: bool, method: str = "rkn4", contact: str | None = None) -> dict:
+def versus_dop853(threads: int, wall: bool, method: str = "rkn4", contact: str | None = None, load: float = 0.0) -> dict:
     """``simulate(..., backend="cuda")`` with ``method`` ("rkn4" or "dp5" at rtol 1e-10, "verlet" at dt = 2.5e-4)
-    and DOP853 on a small decorated chain (with a wall or a free end; ``contact``: its law, :func:`contact_of`)."""
+    and DOP853 on a small decorated chain (with a wall or a free end; ``contact``: its law, :func:`contact_of`;
+    ``load``: a precompression F0). Also each contact's static force (``"static_force"``: F0 to rounding)."""
     import granchain as gc
 
     chain = gc.decorated([0.3, 0.05, 0.2])
     if contact is not None:
         chain = chain.replace(contact=contact_of(contact))
+    if load:
+        chain = chain.with_precompression(load)
     if wall:
         chain = chain.with_wall()
     grid = np.linspace(0.0, 12.0, 25)
@@ -119,7 +126,8 @@ def versus_dop853(threads: int, wall: bool, method: str = "rkn4", contact: str |
     # A damped chain to a fixed end, so that the dissipated energies are of the same interval (the two
     # integrators see the pulse leave at instants that differ within their tolerances, and the granules
     # behind it keep dissipating).
-    end = {"stop": "t_max", "t_max": 15.0} if contact is not None else {}
+    # A precompressed chain runs to its time limit (its contacts do not open): the same, shorter.
+    end = {"stop": "t_max", "t_max": 15.0} if contact is not None or load else {}
     for name, kw in (("cuda", {"integrator": method, "backend": CudaBackend(threads)}),
                      ("dop853", {"integrator": "dop853"})):
         r = gc.simulate(chain, t_grid=grid, **kw, **end)
@@ -127,7 +135,10 @@ def versus_dop853(threads: int, wall: bool, method: str = "rkn4", contact: str |
                      "grid": r.velocity.tolist(), "energy_error": float(r.energy_error),
                      "peak_force": np.asarray(r.peak_force).tolist(), "dissipated_energy": float(r.dissipated_energy),
                      "peak_force_time": np.asarray(r.peak_force_time).tolist(),
-                     "wall_force": None if r.wall_force is None else np.asarray(r.wall_force).tolist()}
+                     "wall_force": None if r.wall_force is None else np.asarray(r.wall_force).tolist(),
+                     "positions": np.asarray(r.positions).tolist(), "t_end": float(r.t_end)}
+    c, n = chain.stiffness, chain.n
+    res["static_force"] = (c * chain.overlaps ** (n - 1.0)).tolist()
     return res
 
 
@@ -166,7 +177,6 @@ def refusals() -> dict:
     chain = gc.decorated([0.3, 0.05])
     cases = {
         "dop853": lambda: gc.simulate(chain, "dop853", backend=backend),
-        "precompression": lambda: gc.simulate(chain.with_precompression(1e-3), "rkn4", backend=backend),
         "yielding contacts": lambda: gc.simulate(chain.replace(contact=gc.ElasticPlastic(0.5)), "dp5", backend=backend),
         "damping with RKN4": lambda: gc.simulate(chain.with_dissipation(0.1), "rkn4", backend=backend),
         "sensors": lambda: gc.simulate(gc.decorated([0.3, 0.05, 0.3]), "rkn4", backend=backend, sensors=[2],
@@ -184,6 +194,24 @@ def refusals() -> dict:
     return got
 
 
+def rest_ahead(threads: int) -> dict:
+    """A precompressed decorated chain (F0 = 1e-3, 8 large granules) on the GPU backend to t = 2, before the pulse
+    has crossed two large granules: the final positions and velocities, which ahead of the pulse must be exactly 0
+    (each contact's dynamic force is its force less its static force by the same arithmetic, exactly 0 in the static
+    state); and, as a negative control, each contact's static force c delta0^(n-1) less F0 (rounding, not 0: an
+    integration that subtracted F0 itself would set the granules ahead moving)."""
+    import granchain as gc
+    from granchain.backends.cuda import CudaBackend
+
+    chain = gc.decorated([0.3, 0.05, 0.2, 0.37, 0.11, 0.02, 0.25, 0.4]).with_precompression(1e-3)
+    with warnings.catch_warnings():  # (the pulse is still rising at t = 2: PEAK_AT_END, as it should be)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        r = gc.simulate(chain, gc.RKN4(), t_max=2.0, backend=CudaBackend(threads))
+    residual = chain.stiffness * chain.overlaps ** (chain.n - 1.0) - chain.static_force
+    return {"status": int(r.status), "t_end": float(r.t_end), "positions": np.asarray(r.positions).tolist(),
+            "velocities": np.asarray(r.velocities).tolist(), "residual": residual.tolist()}
+
+
 def unavailable() -> dict:
     """Without the simulator and without a GPU: the error a user gets."""
     from granchain.backends import BackendUnavailable, get_backend
@@ -195,28 +223,33 @@ def unavailable() -> dict:
     return {"error": None}
 
 
-def damped_ensemble(threads: int, store: str) -> dict:
-    """``run_ensemble`` of a damped family (``RandomDecorated(3)``, Kuwabara-Kono contacts, both chain kinds, 3
-    realisations) with the GPU backend, written to ``store`` and read back, and the same on the CPU in memory: each
-    one's integrators, dissipated energies, energy errors and peak velocities."""
+def model_ensemble(threads: int, store: str, model: str = "damped") -> dict:
+    """``run_ensemble`` of a family of real contacts (``RandomDecorated(3)``, both chain kinds, 3 realisations;
+    ``model`` "damped": Kuwabara-Kono contacts, "precompressed": a static load F0 = 1e-3 and a wall) with the GPU
+    backend, written to ``store`` and read back, and the same on the CPU in memory: each one's integrators,
+    dissipated energies, energy errors, peak velocities and end times (and, with a wall, its peak force)."""
     import xarray as xr
 
     import granchain as gc
     from granchain.backends.cuda import CudaBackend
 
-    family = gc.RandomDecorated(3, contact=gc.Viscoelastic(0.05))
+    if model == "damped":
+        family = gc.RandomDecorated(3, contact=gc.Viscoelastic(0.05))
+    else:
+        family = gc.RandomDecorated(3, static_force=1e-3, wall=True)
     kw = {"realizations": 3, "chains": "both", "progress": False, "pulse_window": "full"}
     gc.run_ensemble(family, out=store, backend=CudaBackend(threads), **kw)
     res = {}
     for name, ds in (("cuda", xr.open_dataset(store, engine="zarr")), ("cpu", gc.run_ensemble(family, out=None, **kw))):
         res[name] = {"integrator": str(ds.attrs.get("integrator")), "backend": ds.attrs.get("backend"),
                      **{k: ds[k].transpose("chain", "realization", ...).values.tolist()
-                        for k in ("dissipated_energy", "energy_error", "peak_velocity", "status")}}
+                        for k in ("dissipated_energy", "energy_error", "peak_velocity", "status", "t_end",
+                                  "peak_wall_force") if k in ds}}
     return res
 
 
 CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "votes": votes, "refusals": refusals,
-          "unavailable": unavailable, "damped_ensemble": damped_ensemble}
+          "unavailable": unavailable, "model_ensemble": model_ensemble, "rest_ahead": rest_ahead}
 
 if __name__ == "__main__":
     name, args = sys.argv[1], [json.loads(a) for a in sys.argv[2:]]

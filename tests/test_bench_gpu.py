@@ -36,6 +36,9 @@ PART_LINES = {
     "5 agree effective": r"^\[5 agree\] effective N=4, .*within the contract",
     "6 damped": r"^\[6 damped\] decorated N=4, viscoelastic .*GPU L=32/shared .*dp5 rtol.*CPU-\d+ wall / GPU wall = [\d.]+x",
     "6 agree": r"^\[6 agree\] decorated N=4, viscoelastic .*relative difference of the dissipated energy",
+    "7 loaded": r"^\[7 loaded\] decorated N=4, precompressed F0 = 0.01, wall: GPU L=32/shared .*rkn4 rtol.*CPU-\d+ wall / "
+                 r"GPU wall = [\d.]+x",
+    "7 agree": r"^\[7 agree\] decorated N=4, precompressed .*relative difference of the wall's peak force",
     "summary": r"^\[summary\] decorated integration +<= 1.5 s: (PASS|FAIL) ",
     "summary total": r"^\[summary\] total [\d.]+ s",
 }

@@ -171,13 +171,79 @@ def test_damped_ensemble_on_the_gpu_is_the_cpus(tmp_path):
     a store and read back: each kind integrated with the CPU's own default for it (the effective chains' tighter
     DP5, not the decorated chains'), and the dissipated energies and energy errors the CPU's to rounding, the
     peaks within 1e-8 (another interpolant)."""
-    res = sim("damped_ensemble", 1, str(tmp_path / "damped.zarr"))
+    res = sim("model_ensemble", 1, str(tmp_path / "damped.zarr"), "damped")
     gpu, cpu = res["cuda"], res["cpu"]
     assert gpu["status"] == cpu["status"] and np.all(np.array(cpu["status"]) == 0)
     assert np.min(cpu["dissipated_energy"]) > 0.02
     np.testing.assert_allclose(gpu["dissipated_energy"], cpu["dissipated_energy"], rtol=1e-12)
     np.testing.assert_allclose(gpu["energy_error"], cpu["energy_error"], rtol=0, atol=1e-12)
     np.testing.assert_allclose(gpu["peak_velocity"], cpu["peak_velocity"], rtol=1e-8)
+
+
+@pytest.mark.slow
+def test_precompressed_ensemble_on_the_gpu_is_the_cpus(tmp_path):
+    """``run_ensemble`` of a precompressed family against a wall on the GPU backend, both chain kinds, through a
+    store: every chain runs to its own time limit (no exit under a static load), the decorated chains (RKN4 on
+    both backends) give the CPU's peaks and wall forces to rounding, the effective chains (RKN4 on the GPU, the
+    CPU's default DP5 there) within the accuracy contract; energy balanced within 1e-7 on both."""
+    res = sim("model_ensemble", 1, str(tmp_path / "loaded.zarr"), "precompressed")
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert gpu["status"] == cpu["status"] and np.all(np.array(cpu["status"]) == 0)
+    np.testing.assert_array_equal(gpu["t_end"], cpu["t_end"])
+    assert np.min(cpu["peak_wall_force"]) > 0.5  # the pulse on the wall, far above the static load (1e-3)
+    for key in ("peak_velocity", "peak_wall_force"):
+        np.testing.assert_allclose(gpu[key][0], cpu[key][0], rtol=1e-12, err_msg=f"decorated {key}")
+        np.testing.assert_allclose(gpu[key][1], cpu[key][1], rtol=1e-6, err_msg=f"effective {key}")
+    assert np.max(np.abs(gpu["energy_error"])) < 1e-7 and np.max(np.abs(cpu["energy_error"])) < 1e-7
+
+
+def test_precompressed_granules_ahead_stay_exactly_at_rest():
+    """A precompressed chain on the GPU is integrated in displacements from its static state, each contact pushing
+    with its force less its static force computed by the same arithmetic: ahead of the pulse that is exactly 0, so
+    the last granules are exactly at rest at t = 2 (the GPU integrates every granule; no window hides them).
+    Negative control: the static forces differ from F0 by rounding, so an integration that subtracted F0 instead
+    would push them."""
+    res = sim("rest_ahead", 1)
+    assert res["t_end"] == 2.0
+    assert res["positions"][-2:] == [0.0, 0.0] and res["velocities"][-2:] == [0.0, 0.0]
+    assert res["positions"][0] > 0.5
+    assert any(r != 0.0 for r in res["residual"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("threads, exchange, args", [
+    (1, "shared", (4, 2, 16.0, False, True, True, "decorated", "decorated", None)),
+    (1, "shared", (4, 2, 16.0, False, True, True, "effective", "verlet:0.01", None)),
+    (32, "shuffle", (2, 1, 5.0, False, False, True, "decorated", "decorated", None)),
+], ids=["rkn4", "verlet", "rkn4 warp shuffles"])
+def test_precompressed_chains_are_the_cpu_kernels(threads, exchange, args):
+    """Precompressed chains (F0 = 1e-3), one thread per chain and one warp per chain: the CPU kernels' results to
+    rounding (the static overlap in every compression, the dynamic force in the equations of motion, the total
+    force in the records: each contact's peak starts from its static load), to the time limit; one thread per
+    chain, a second run bitwise the first (the warp's run is not repeated: the simulator takes minutes for it)."""
+    res = sim("compare", threads, exchange, *args, 1e-3)
+    assert_same_run(res["cuda"], res["cpu"])
+    assert res["again"] in (None, res["cuda"]) and (res["again"] is not None) == (threads == 1)
+    assert np.min(res["cpu"]["peak_force"]) > 1e-3
+    assert res["cpu"]["t_end"] == [args[2]] * len(res["cpu"]["t_end"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("threads, contact", [(1, "kuwabara-kono:0.05"), (4, "viscous:0.1")],
+                         ids=["kuwabara-kono, one thread", "viscous, shared memory"])
+def test_precompressed_damped_chains_are_the_cpu_kernels(threads, contact):
+    """Damped contacts under a static load (DP5; the dissipated power of each contact from its total compression):
+    the CPU's steps and dissipated energy, peaks within 1e-7 (read on another interpolant: measured 1.4e-8 at the
+    damped default's rtol 1e-6)."""
+    res = sim("compare", threads, "shared", 6 if threads == 1 else 4, 2 if threads == 1 else 1, 16.0, False, False,
+              True, "effective", "damped", contact, 1e-3)
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert gpu["status"] == cpu["status"] and gpu["n_steps"] == cpu["n_steps"]
+    assert min(cpu["dissipated_energy"]) > 0.02
+    np.testing.assert_allclose(gpu["dissipated_energy"], cpu["dissipated_energy"], rtol=1e-12)
+    np.testing.assert_allclose(gpu["energy_error"], cpu["energy_error"], rtol=0, atol=1e-12)
+    for key in ("peak_velocity", "peak_force"):
+        np.testing.assert_allclose(gpu[key], cpu[key], rtol=1e-7, err_msg=key)
 
 
 def test_warp_votes_give_the_last_lanes_value():
@@ -200,18 +266,22 @@ def test_warp_votes_give_the_last_lanes_value():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method, contact", [("rkn4", None), ("dp5", None), ("verlet", None), ("dp5", "kuwabara-kono:0.05"),
-                                             ("dp5", "viscous:0.1")],
-                         ids=["rkn4", "dp5", "verlet", "dp5 kuwabara-kono", "dp5 viscous"])
+@pytest.mark.parametrize("method, contact, load", [("rkn4", None, 0.0), ("dp5", None, 0.0), ("verlet", None, 0.0),
+                                                   ("dp5", "kuwabara-kono:0.05", 0.0), ("dp5", "viscous:0.1", 0.0),
+                                                   ("rkn4", None, 1e-2), ("dp5", "kuwabara-kono:0.05", 1e-3)],
+                         ids=["rkn4", "dp5", "verlet", "dp5 kuwabara-kono", "dp5 viscous", "rkn4 precompressed",
+                              "dp5 kuwabara-kono precompressed"])
 @pytest.mark.parametrize("wall", [False, True], ids=["free end", "wall"])
-def test_single_chain_against_dop853(wall, method, contact):
+def test_single_chain_against_dop853(wall, method, contact, load):
     """``simulate(backend=...)`` on the GPU backend, with each method it has a kernel for (Verlet at dt =
     2.5e-4, the step at which it meets the contract on decorated chains: ``benchmarks/bench_verlet.py``), and
-    DP5 for contacts that dissipate (to the same end, t = 15), against SciPy's DOP853 (an independent
-    integrator): peaks, grid velocities and force peaks (the wall's among them) within the accuracy contract,
-    the energy balance E_end + E_dissipated = E_0 within 1e-8; damped, also the force peaks' times, the wall
-    force on the grid and the dissipated energy."""
-    res = sim("versus_dop853", 1, wall, method, contact)
+    DP5 for contacts that dissipate (to the same end, t = 15), elastic and damped chains under a static load (to
+    t = 15: they do not stop at an exit), against SciPy's DOP853 (an independent integrator): peaks, grid
+    velocities and force peaks (the wall's among them) within the accuracy contract, the energy balance
+    E_end + E_dissipated = E_0 within 1e-8; damped or loaded, also the force peaks' times and the wall force on
+    the grid; damped, the dissipated energy; loaded, every force peak at or above the contact's static load and the
+    wall's force at t = 0 that load (F0)."""
+    res = sim("versus_dop853", 1, wall, method, contact, load)
     gpu, ref = res["cuda"], res["dop853"]
     assert gpu["status"] == ref["status"] == 0
     np.testing.assert_allclose(gpu["peak_velocity"], ref["peak_velocity"], rtol=1e-6)
@@ -219,12 +289,20 @@ def test_single_chain_against_dop853(wall, method, contact):
     np.testing.assert_allclose(gpu["grid"], ref["grid"], atol=1e-6)
     np.testing.assert_allclose(gpu["peak_force"], ref["peak_force"], rtol=1e-6)
     assert abs(gpu["energy_error"]) < 1e-8
-    if contact is not None:
+    if contact is not None or load:
         np.testing.assert_allclose(gpu["peak_force_time"], ref["peak_force_time"], atol=1e-5)
-        assert ref["dissipated_energy"] > 0.04
-        np.testing.assert_allclose(gpu["dissipated_energy"], ref["dissipated_energy"], rtol=1e-6)
+        assert gpu["t_end"] == ref["t_end"] == 15.0
         if wall:
             np.testing.assert_allclose(gpu["wall_force"], ref["wall_force"], atol=1e-8)
+    if contact is not None:
+        assert ref["dissipated_energy"] > 0.04
+        np.testing.assert_allclose(gpu["dissipated_energy"], ref["dissipated_energy"], rtol=1e-6)
+    if load:
+        static = np.array(res["static_force"])
+        np.testing.assert_allclose(static, load, rtol=1e-12)
+        assert np.all(np.array(gpu["peak_force"]) >= static * (1 - 1e-12))
+        if wall:
+            assert gpu["wall_force"][0] == pytest.approx(load, rel=1e-12)
 
 
 def test_what_it_cannot_run_is_refused_naming_the_cpu_backend():

@@ -7,8 +7,9 @@ Three backends today:
   :mod:`granchain.backends.kernels` for DP5, RKN4 and Verlet, one chain or a parallel batch;
 - ``"scipy"`` (:class:`~granchain.backends.scipy_backend.ScipyBackend`): SciPy's DOP853, the
   independent reference;
-- ``"cuda"`` (``granchain.backends.cuda.CudaBackend``): RKN4 for elastic chains on an NVIDIA GPU
-  (Numba's CUDA target), batches of thousands of chains at once.
+- ``"cuda"`` (``granchain.backends.cuda.CudaBackend``): RKN4, DP5 and Verlet for elastic chains, DP5 for
+  damped ones, precompressed or not, on an NVIDIA GPU (Numba's CUDA target), batches of thousands of chains
+  at once.
 
 Every integrator names its backend (``Integrator.backend``); :func:`get_backend` returns it. Before a
 run the backend checks that the integrator's capabilities fit the chain's declared assumptions

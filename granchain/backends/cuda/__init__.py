@@ -10,8 +10,9 @@ they dissipate integrated and its error controlled as the CPU does, so its per-r
 results agree with the CPU backend's within the accuracy contract (not bit for bit: the GPU's fused
 multiply-adds round differently, and DP5's peaks are read on another interpolant, ``kernel.make_kernel``),
 and its sums of the averaged pulse are fixed-point integers added in a fixed order, so a run repeated
-gives the same bits. What it has no kernel for (precompression, contacts that yield, the aligned pulse,
-force sensors on the grid) is refused with an error that names the CPU backend.
+gives the same bits. Precompressed chains run as the CPU runs them (in displacements from the static state,
+to their time limit). What it has no kernel for (contacts that yield, the aligned pulse, force sensors on the
+grid) is refused with an error that names the CPU backend.
 
 Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, which installs
 ``numba-cuda``). Under ``NUMBA_ENABLE_CUDASIM=1`` the same kernels run in Numba's simulator on a CPU
@@ -103,8 +104,8 @@ class CudaBackend(Backend):
     # ------------------------------------------------------------------ what it runs
     def check(self, integrator, chain) -> None:
         """RKN4, DP5 or Verlet on an elastic (power-law) chain, or DP5 on a damped one (Kuwabara-Kono or
-        viscous contacts), unloaded and at rest ahead of the pulse; then :meth:`Backend.check` (which refuses
-        RKN4 and Verlet for damped contacts). Each refusal names the CPU backend, which runs all of these."""
+        viscous contacts), precompressed or not, at rest ahead of the pulse; then :meth:`Backend.check` (which
+        refuses RKN4 and Verlet for damped contacts). Each refusal names the CPU backend, which runs all of these."""
         cpu = "; use the CPU backend (backend='cpu')"
         if type(chain.contact).__dict__.get("form") not in self.law_forms:
             raise ValueError(f"the cuda backend has no kernel for the contact law {chain.contact!r} (elastic power-law, "
@@ -112,23 +113,21 @@ class CudaBackend(Backend):
         if integrator.name not in self.methods:
             raise ValueError(f"the cuda backend runs RKN4, DP5 and Verlet (granchain.RKN4, granchain.DP5, "
                              f"granchain.Verlet), not {integrator.name}{cpu}")
-        if chain.precompression.applied:
-            raise ValueError(f"the cuda backend has no kernel for precompressed chains{cpu}")
         if not chain.initial.rest_ahead:
             raise ValueError(f"the cuda backend starts every granule but the first at rest; the initial state "
                              f"{chain.initial!r} does not{cpu}")
         super().check(integrator, chain)
 
-    def _kernel(self, M: int, method: str, fixed: bool, damped: bool):
+    def _kernel(self, M: int, method: str, fixed: bool, damped: bool, precompressed: bool):
         from .kernel import make_kernel
 
         L = self.threads_per_chain
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
-        key = (L, G, method, fixed, damped)
+        key = (L, G, method, fixed, damped, precompressed)
         if key not in self._kernels:
             self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed,
-                                             damped)
+                                             damped, precompressed)
         return L, G, self._kernels[key]
 
     # ------------------------------------------------------------------ runs
@@ -221,8 +220,12 @@ class CudaBackend(Backend):
         prm[:] = (*steps, controls.exit_margin, controls.peak_rtol, controls.max_steps, float(chain.n),
                   float(bool(stop_at_exit)), float(chain.boundary.wall), float(t_grid[-1]) if T else 0.0,
                   float(pulse_end is not None), float(law.gamma), float(type(law).__dict__.get("form") == "viscous"),
-                  float(bool(law.clamp)))
-        L, G, kernel = self._kernel(M, ran.name, fixed, damped)
+                  float(bool(law.clamp)), float(chain.static_force))
+        # A precompressed chain runs without a trailing window (effective_integrator: its loaded far end licenses
+        # none), which the kernel's static state relies on (its contacts never leave the integration).
+        loaded = chain.precompression.applied
+        assert not (loaded and steps[5]), "a precompressed chain runs without a trailing window"
+        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded)
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.
@@ -310,14 +313,22 @@ def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
     """(E_end + E_dissipated - E_0) / E_0 per row (``kernels.forces.final_energy``): kinetic energy of every granule (a
     wall's left out; granules behind the trailing window keep the velocity they left with), the potential
     (c / n) delta^n (Eq. hertz-1) of the contacts still integrated at the end, and the potential the
-    contacts behind the window held when they left it; E_0 = m_1 v_0^2 / 2."""
+    contacts behind the window held when they left it; E_0 = m_1 v_0^2 / 2. In a precompressed chain the
+    potential is measured from the static state (``kernels.forces.add_potential``): V(delta0 + D) - V(delta0) - f0 D
+    for each contact, D = x_j - x_{j+1} (Nesterenko 2001, Sec. 1.1)."""
     n = float(chain.n)
     x, v, lo = res["positions"], res["velocities"], res["window_start"]
     finite = np.isfinite(masses)
     kinetic = 0.5 * np.sum(np.where(finite, masses, 0.0) * v * v, axis=1)
-    d = np.maximum(x[:, :-1] - x[:, 1:], 0.0)
-    integrated = np.arange(d.shape[1])[None, :] >= lo[:, None]
-    potential = np.sum(np.where(integrated, stiffness[:, : d.shape[1]] * d**n, 0.0), axis=1) / n + res["frozen_potential"]
+    D = x[:, :-1] - x[:, 1:]
+    c = stiffness[:, : D.shape[1]]
+    integrated = np.arange(D.shape[1])[None, :] >= lo[:, None]
+    if chain.precompression.applied:  # (no trailing window: every contact is integrated to the end)
+        d0 = chain.precompression.overlaps(c, n)
+        stored = c * np.maximum(d0 + D, 0.0) ** n - c * d0**n - n * c * d0 ** (n - 1.0) * D
+    else:
+        stored = c * np.maximum(D, 0.0) ** n
+    potential = np.sum(np.where(integrated, stored, 0.0), axis=1) / n + res["frozen_potential"]
     e0 = 0.5 * masses[:, 0] * v0 * v0
     with np.errstate(invalid="ignore"):
         return (kinetic + potential + res["dissipated_energy"] - e0) / e0

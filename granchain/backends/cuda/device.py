@@ -29,6 +29,43 @@ def contact_force(d, c, n):
     return c * d ** (n - 1.0)
 
 
+# -- A precompressed chain (``kernels.forces``: displacements from the static state) -------------------------
+# ``pre`` is the (2, M) array of the contacts' static overlaps delta0_j (row 0) and static forces f0_j (row 1),
+# or None in a kernel compiled for unloaded chains: Numba prunes the ``pre is None`` branches at compile time
+# (the argument's type is NoneType), so those kernels hold the same machine code as before precompression.
+
+@cuda.jit(device=True)
+def compression(D, j, pre):
+    """Contact j's compression from the relative displacement ``D`` = x_j - x_{j+1}: delta0_j + D in a
+    precompressed chain (``kernels.forces.accelerations``: the static overlap included), else D."""
+    if pre is None:
+        return D
+    return pre[0, j] + D
+
+
+@cuda.jit(device=True)
+def dynamic(f, j, pre):
+    """Contact j's dynamic force: its force ``f`` less its static force f0_j (exactly 0 in the static state, so
+    granules ahead of the pulse stay exactly at rest), else ``f``."""
+    if pre is None:
+        return f
+    return f - pre[1, j]
+
+
+@cuda.jit(device=True)
+def static_state(c, load, law):
+    """``kernels.forces.static_state``: (delta0, f0) of a contact of prefactor ``c`` in a chain precompressed by
+    F0 = ``load``: delta0 = (F0 / c)^(1/(n-1)) (V. F. Nesterenko, *Dynamics of Heterogeneous Materials*, Springer
+    2001, Sec. 1.1) and f0 its force by the kernels' own law and arithmetic (at rest: w = 0), F0 to rounding;
+    (0, 0) for no contact (c = 0)."""
+    if load <= 0.0 or c <= 0.0:
+        return 0.0, 0.0
+    d0 = (load / c) ** (1.0 / (law[0] - 1.0))
+    if law[1] > 0.0:
+        return d0, law_force(d0, 0.0, c, law)
+    return d0, contact_force(d0, c, law[0])
+
+
 @cuda.jit(device=True)
 def hermite_x(x0, v0, a0, x1, v1, a1, h, t):
     """Position at theta = t on the quintic Hermite interpolant through (x, v, a) at both ends of a step
@@ -70,15 +107,18 @@ def dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t):
 
 
 @cuda.jit(device=True)
-def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, n):
-    """Acceleration of granule k from the dense-output positions of it and its neighbours."""
+def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, n, pre):
+    """Acceleration of granule k from the dense-output positions of it and its neighbours (``pre``: the static
+    state of a precompressed chain, or None)."""
     xk = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
     left = 0.0
     right = 0.0
     if k > 0:
-        left = contact_force(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk, c_left, n)
+        left = dynamic(contact_force(compression(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk, k - 1, pre),
+                                     c_left, n), k - 1, pre)
     if k < M - 1:
-        right = contact_force(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), c_right, n)
+        right = dynamic(contact_force(compression(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), k, pre),
+                                      c_right, n), k, pre)
     return (left - right) * inv_m
 
 
@@ -159,38 +199,40 @@ def law_power(d, w, f, c, law):
 
 
 @cuda.jit(device=True)
-def dense_law_force(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c, law):
+def dense_law_force(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c, law, pre):
     """``kernels.dense.dense_force`` of a damped law: contact k's force (stiffness ``c``) at theta = t, from the
-    dense output's compression and its rate."""
-    return law_force(dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
-                     dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
+    dense output's compression (its static overlap included) and its rate."""
+    d = compression(dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
+                    k, pre)
+    return law_force(d, dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
                      c, law)
 
 
 @cuda.jit(device=True)
-def damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, law):
+def damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, law, pre):
     """:func:`dense_acceleration` by a damped law: the forces read the dense-output velocities too."""
     xk = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
     vk = dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
     left = 0.0
     right = 0.0
     if k > 0:
-        left = law_force(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk,
-                         dense_v(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - vk, c_left, law)
+        left = dynamic(law_force(compression(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk, k - 1, pre),
+                                 dense_v(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - vk, c_left, law), k - 1, pre)
     if k < M - 1:
-        right = law_force(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
-                          vk - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), c_right, law)
+        right = dynamic(law_force(compression(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), k, pre),
+                                  vk - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), c_right, law), k, pre)
     return (left - right) * inv_m
 
 
 @cuda.jit(device=True)
-def dense_force_rate(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, c_after, inv_m0, inv_m1, law):
+def dense_force_rate(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, c_after, inv_m0, inv_m1, law, pre):
     """``kernels.dense.dense_force_rate``: the rate of contact k's force on the dense output, from the damped
     accelerations of granules k and k + 1 (``c_before``: contact k - 1's stiffness, 0 at the window's edge;
     ``c_after``: contact k + 1's, 0 past the chain)."""
-    dw = (damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, inv_m0, law)
-          - damped_acceleration(k + 1, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_k, c_after, inv_m1, law))
-    d = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
+    dw = (damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, inv_m0, law, pre)
+          - damped_acceleration(k + 1, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_k, c_after, inv_m1, law, pre))
+    d = compression(dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
+                    k, pre)
     w = dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
     return force_rate(d, w, dw, c_k, law)
 
@@ -207,28 +249,28 @@ ROOT_FORCE_RATE = 3
 
 
 @cuda.jit(device=True)
-def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_before, c_k, c_after, inv_m0, inv_m1, law):
+def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_before, c_k, c_after, inv_m0, inv_m1, law, pre):
     """First theta in [0, 1] where the followed function ``what`` (the ROOT_* above; f_lo > 0 its value at 0,
     f_hi <= 0 at 1) stops being positive, on the dense output (``kernels.dense.first_root``: Illinois while the
     bracket has a strictly negative end, bisection while it ends on an exact zero). For granule k:
     ``c_before``, ``c_k`` its left and right contacts' stiffness (0 for none), ``inv_m0`` its inverse mass; for
     the rate of contact k's force also ``c_after`` (contact k + 1's) and ``inv_m1`` (granule k + 1's); ``law``
-    the contacts' (n, gamma, viscous, clamp)."""
+    the contacts' (n, gamma, viscous, clamp), ``pre`` the static state of a precompressed chain (or None)."""
     lo = 0.0
     hi = 1.0
     side = 0
     for _ in range(200):
         theta = bracket_theta(lo, hi, f_lo, f_hi)
         if what == ROOT_ACCELERATION:
-            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law[0])
+            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law[0], pre)
         elif what == ROOT_APPROACH:
             f = (dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                  - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta))
         elif what == ROOT_DAMPED_ACCELERATION:
-            f = damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law)
+            f = damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law, pre)
         else:
             f = dense_force_rate(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, c_after, inv_m0, inv_m1,
-                                 law)
+                                 law, pre)
         lo, hi, f_lo, f_hi, side = bracket_update(f, theta, lo, hi, f_lo, f_hi, side)
         if hi - lo < 1e-14:
             break

@@ -12,7 +12,7 @@ from collections import namedtuple
 from numba import cuda, int64
 
 from ..kernels.window import CUT_FORCE
-from .device import FULL_MASK, contact_force, law_force, law_power, warp_any, warp_last
+from .device import FULL_MASK, compression, contact_force, dynamic, law_force, law_power, warp_any, warp_last
 
 #: The device functions of a layout, by name.
 Exchange = namedtuple("Exchange", ["sync", "group_max", "group_any", "group_last", "group_sum", "right_neighbour",
@@ -93,11 +93,13 @@ def make_exchange(L: int, G: int, shuffle: bool, votes: bool, damped: bool = Fal
         return shared[j] if j < M else 0.0
 
     @cuda.jit(device=True)
-    def forces(xs, us, own, M, lo, bx, c_left, c_right, inv_m, law, acc):
+    def forces(xs, us, own, M, lo, bx, c_left, c_right, inv_m, law, acc, pre):
         """acc[s] = the acceleration of owned granule s at the positions ``xs``: every thread of the group
         calls it (the positions cross thread boundaries through ``bx``, or by shuffles). Granules behind the
         trailing window (i < lo) are not integrated (acceleration 0: they continue ballistically) and the
-        contact at its edge is dropped (``kernels.window``). ``law``: the contacts' (n, gamma, viscous, clamp).
+        contact at its edge is dropped (``kernels.window``). ``law``: the contacts' (n, gamma, viscous, clamp);
+        ``pre``: the static state of a precompressed chain (``device.compression``; None: unloaded), whose contacts
+        exert their dynamic force, 0 in the static state (``kernels.forces.accelerations``).
 
         ``damped`` (a constant of the code): the forces of a damped law (``device.law_force``) read the stage
         velocities ``us`` too (through ``bx[MMAX:]``, or by shuffles), and the function returns this thread's
@@ -138,23 +140,27 @@ def make_exchange(L: int, G: int, shuffle: bool, votes: bool, damped: bool = Fal
                         x_right = bx[i + 1] if i < M - 1 else 0.0
                         u_right = bx[MMAX + i + 1] if i < M - 1 else 0.0
                     if i > lo:
-                        left = law_force(x_left - xs[s], u_left - us[s], c_left[s], law)
+                        d = compression(x_left - xs[s], i - 1, pre)
+                        left = dynamic(law_force(d, u_left - us[s], c_left[s], law), i - 1, pre)
                     if i < M - 1:
-                        d = xs[s] - x_right
+                        d = compression(xs[s] - x_right, i, pre)
                         w = us[s] - u_right
                         right = law_force(d, w, c_right[s], law)
                         if i >= lo:
                             power += law_power(d, w, right, c_right[s], law)
+                        right = dynamic(right, i, pre)
                 elif SHUFFLE:
                     if i > lo:
-                        left = contact_force((xs[s - 1] if s > 0 else xl) - xs[s], c_left[s], n)
+                        left = dynamic(contact_force(compression((xs[s - 1] if s > 0 else xl) - xs[s], i - 1, pre),
+                                                     c_left[s], n), i - 1, pre)
                     if i < M - 1:
-                        right = contact_force(xs[s] - (xs[s + 1] if s < G - 1 else xr), c_right[s], n)
+                        right = dynamic(contact_force(compression(xs[s] - (xs[s + 1] if s < G - 1 else xr), i, pre),
+                                                      c_right[s], n), i, pre)
                 else:
                     if i > lo:
-                        left = contact_force(bx[i - 1] - xs[s], c_left[s], n)
+                        left = dynamic(contact_force(compression(bx[i - 1] - xs[s], i - 1, pre), c_left[s], n), i - 1, pre)
                     if i < M - 1:
-                        right = contact_force(xs[s] - bx[i + 1], c_right[s], n)
+                        right = dynamic(contact_force(compression(xs[s] - bx[i + 1], i, pre), c_right[s], n), i, pre)
                 acc[s] = (left - right) * inv_m[s] if i >= lo else 0.0
         return power
 

@@ -27,8 +27,8 @@ which computes as the CPU does, they are the CPU's to rounding: ``tests/test_cud
 ahead of the pulse are integrated too (the CPU's active window skips them: they are exactly at rest, so
 this changes nothing, and the threads that hold them would idle anyway); the trailing window behind the
 pulse is the CPU's (``kernels.window``). Elastic power-law contacts (Hertz, n = 5/2, or any n), or with DP5 damped ones
-(Kuwabara-Kono, viscous: ``make_kernel``'s ``damped``), free end or fixed wall, no precompression: what else a chain
-declares is refused by ``CudaBackend.check``.
+(Kuwabara-Kono, viscous: ``make_kernel``'s ``damped``), free end or fixed wall, precompressed or not
+(``make_kernel``'s ``precompressed``): what else a chain declares is refused by ``CudaBackend.check``.
 
 The step loop calls device functions of three modules: ``granchain.backends.cuda.methods`` (each method's
 stages and error estimate), ``granchain.backends.cuda.exchange`` (the group's reductions and the
@@ -52,6 +52,7 @@ from .device import (
     ROOT_APPROACH,
     ROOT_DAMPED_ACCELERATION,
     ROOT_FORCE_RATE,
+    compression,
     contact_force,
     cut_target,
     dense_law_force,
@@ -63,6 +64,7 @@ from .device import (
     hermite_max_estimate,
     law_force,
     root,
+    static_state,
 )
 from .exchange import make_exchange
 from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, make_stages, make_velocity
@@ -70,13 +72,14 @@ from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, 
 
 #: Layout of the float settings array ``prm`` the kernel reads.
 #: ``P_GAMMA``, ``P_VISCOUS``, ``P_CLAMP``: a damped law's constant, 1 for the viscous law (else Kuwabara-Kono's), 1
-#: where its force is clamped at 0 (``records.Params``; read by the damped kernels alone).
+#: where its force is clamped at 0 (``records.Params``; read by the damped kernels alone). ``P_STATIC``: the
+#: precompression F0 (``records.Params.static_force``; read by the precompressed kernels alone).
 (P_RTOL, P_ATOL, P_FIRST, P_RELAX_LAG, P_RELAX_FACTOR, P_WINDOW_LAG, P_EXIT_MARGIN, P_PEAK_RTOL, P_MAX_STEPS, P_N,
- P_STOP_AT_EXIT, P_WALL, P_T_NEEDED, P_WINDOWS, P_GAMMA, P_VISCOUS, P_CLAMP, P_SIZE) = range(18)
+ P_STOP_AT_EXIT, P_WALL, P_T_NEEDED, P_WINDOWS, P_GAMMA, P_VISCOUS, P_CLAMP, P_STATIC, P_SIZE) = range(19)
 
 
 def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False, votes: bool = True,
-                method: str = "rkn4", fixed: bool = False, damped: bool = False):
+                method: str = "rkn4", fixed: bool = False, damped: bool = False, precompressed: bool = False):
     """The batch kernel of ``method`` ("rkn4", "dp5" or "verlet") for ``L`` threads per chain and ``G``
     granules per thread (chains of up to ``L * G`` granules). ``L``, ``G``, the method and ``fixed`` are
     constants of its code: Numba prunes the barriers of ``L = 1`` and the other methods' code, and sizes
@@ -110,6 +113,15 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     while the contact still closes); after a cut of the trailing window the first stage is evaluated again
     (the contact at its edge dropped). The kernel writes each chain's dissipated energy.
 
+    ``precompressed`` (every method): a chain held by the static force F0 = ``P_STATIC``
+    (``granchain.model.contacts.Precompression``), integrated as the CPU integrates it (``kernels.forces``): in
+    displacements from the static state, each contact with its static overlap delta0_j and force f0_j
+    (``device.static_state``, computed once per chain into a shared array) and the dynamic force F_j - f0_j,
+    exactly 0 in the static state, so the granules ahead of the pulse stay exactly at rest; the recorded forces
+    (peaks, the wall's on the grid) are the total ones, the static load included, which is also each contact's
+    first peak candidate at t = 0 (``kernels.peaks.initial_force_records``). Such a chain has no trailing window
+    or relaxed zone (its contacts never open: ``CudaBackend`` runs it with neither) and runs to its time limit.
+
     Barriers: a group exchanges the stage positions through two alternating shared arrays, so that one
     barrier per force evaluation suffices (a thread can only overwrite an array after every thread has
     passed the next barrier, i.e. finished reading it); per step, one for each force evaluation (RKN4
@@ -139,6 +151,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     options = {} if max_registers is None else {"max_registers": max_registers}
 
     DAMPED = bool(damped)
+    LOADED = bool(precompressed)
+    LOADED_DAMPED = LOADED and DAMPED  # (one constant: a test of DAMPED nested in LOADED's changed the others' PTX)
     (sync, group_max, group_any, group_last, group_sum, right_neighbour, forces,
      cut_candidates) = make_exchange(L, G, SHUFFLE, VOTES, DAMPED)
     stages = make_stages(method, forces, G, DAMPED)  # (refuses a method it has no stages for, and damping but DP5)
@@ -185,6 +199,10 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
             red_w = cuda.shared.array(LD, float64)
             red_z = cuda.shared.array(LD, float64)
             tail = cuda.shared.array(4, float64)
+            if LOADED:  # each contact's static overlap and force
+                pre = cuda.shared.array((2, MMAX), float64)
+            else:
+                pre = None
         else:
             bxa = cuda.local.array(BX, float64)
             bxb = cuda.local.array(BX, float64)
@@ -203,6 +221,10 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
             red_w = cuda.local.array(1, float64)
             red_z = cuda.local.array(1, float64)
             tail = cuda.local.array(4, float64)
+            if LOADED:
+                pre = cuda.local.array((2, MMAX), float64)
+            else:
+                pre = None
         x = cuda.local.array(G, float64)
         v = cuda.local.array(G, float64)
         a0 = cuda.local.array(G, float64)
@@ -260,6 +282,13 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                     peak_f[r, i] = 0.0
                     peak_ft[r, i] = 0.0
                     peak_d[r, i] = 0.0
+                    if LOADED:  # the static state, and the force at t = 0: the contact's first peak candidate
+                        pre[0, i], pre[1, i] = static_state(c_right[s], prm[P_STATIC], law)
+                        peak_f[r, i] = pre[1, i]
+                    if LOADED_DAMPED:  # (the struck granule's contact closes at v0: ``peaks.initial_force_records``)
+                        peak_f[r, i] = law_force(pre[0, i], v[s], c_right[s], law)
+        if LOADED:
+            sync()
         # The initial state: the first peak candidates, and the grid times <= 0.
         for s in range(G):
             q = q_of[s]
@@ -273,10 +302,13 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 if q >= 0:
                     grid_v[r, g, q] = v[s]
             if wall and lane == 0:
-                grid_f[r, g] = 0.0
+                if LOADED:  # the static load on the wall (the wall contact's force at t = 0, written above)
+                    grid_f[r, g] = peak_f[r, M - 2]
+                else:
+                    grid_f[r, g] = 0.0
             g += 1
         lo = int64(0)  # the trailing window: granules 0..lo-1 have left the integration
-        p0 = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0)
+        p0 = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0, pre)
         if DAMPED:
             pw[0] = p0
 
@@ -306,7 +338,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 h = t_stop - t
                 last = True
             h2 = h * h
-            stages(x, v, a0, xs, vs, a3, k1, k2, stage, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw)
+            stages(x, v, a0, xs, vs, a3, k1, k2, stage, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre)
             # The new velocities (RKN4) and this thread's share of the error norm.
             e = 0.0
             for s in range(G):
@@ -401,9 +433,9 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         w0 = v[s] - (v[s + 1] if s < G - 1 else vr0)
                         w1 = vs[s] - (vs[s + 1] if s < G - 1 else vr1)
                         if DAMPED:  # a damped contact's force peaks where its rate falls (``kernels.rkloop.force_peaks``)
-                            w0 = force_rate(x[s] - (x[s + 1] if s < G - 1 else xr0), w0,
+                            w0 = force_rate(compression(x[s] - (x[s + 1] if s < G - 1 else xr0), i, pre), w0,
                                             a0[s] - (a0[s + 1] if s < G - 1 else ar0), c_right[s], law)
-                            w1 = force_rate(xs[s] - (xs[s + 1] if s < G - 1 else xr1), w1,
+                            w1 = force_rate(compression(xs[s] - (xs[s + 1] if s < G - 1 else xr1), i, pre), w1,
                                             a3[s] - (a3[s + 1] if s < G - 1 else ar1), c_right[s], law)
                         if falls(w0, w1):
                             cand = 1
@@ -436,7 +468,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         else:  # the root of its (damped) acceleration
                             theta = root(ROOT_DAMPED_ACCELERATION if DAMPED else ROOT_ACCELERATION, i, M, a0[s], a3[s],
                                          hx0, hv0, ha0, hx1, hv1, ha1, h, c_left[s] if i > lo else 0.0, c_right[s], 0.0,
-                                         inv_m[s], 0.0, law)
+                                         inv_m[s], 0.0, law, pre)
                             vpk = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                         if vpk > peak_v[r, q] + peak_rtol * abs(peak_v[r, q]):
                             peak_v[r, q] = vpk
@@ -446,33 +478,33 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         w0 = hv0[i] - hv0[i + 1]
                         w1 = hv1[i] - hv1[i + 1]
                         if DAMPED:
-                            r0 = force_rate(hx0[i] - hx0[i + 1], w0, ha0[i] - ha0[i + 1], c_right[s], law)
-                            r1 = force_rate(hx1[i] - hx1[i + 1], w1, ha1[i] - ha1[i + 1], c_right[s], law)
+                            r0 = force_rate(compression(hx0[i] - hx0[i + 1], i, pre), w0, ha0[i] - ha0[i + 1], c_right[s], law)
+                            r1 = force_rate(compression(hx1[i] - hx1[i + 1], i, pre), w1, ha1[i] - ha1[i + 1], c_right[s], law)
                             if falls(r0, r1):  # the root of the force's rate; the force by the law there
                                 theta = root(ROOT_FORCE_RATE, i, M, r0, r1, hx0, hv0, ha0, hx1, hv1, ha1, h,
                                              c_left[s] if i > lo else 0.0, c_right[s],
                                              stiffness[r, i + 1] if i < M - 2 else 0.0, inv_m[s], 1.0 / masses[r, i + 1],
-                                             law)
-                                fp = dense_law_force(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law)
+                                             law, pre)
+                                fp = dense_law_force(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law, pre)
                                 if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                                     peak_f[r, i] = fp
                                     peak_ft[r, i] = t + theta * h
                         elif VERLET and falls(w0, w1):  # at the zero of the linearly interpolated relative velocity
                             theta = w0 / (w0 - w1)
-                            dp = (hermite3(hx0[i], hv0[i], hx1[i], hv1[i], h, theta)
-                                  - hermite3(hx0[i + 1], hv0[i + 1], hx1[i + 1], hv1[i + 1], h, theta))
+                            dp = compression(hermite3(hx0[i], hv0[i], hx1[i], hv1[i], h, theta)
+                                             - hermite3(hx0[i + 1], hv0[i + 1], hx1[i + 1], hv1[i + 1], h, theta), i, pre)
                             fp = contact_force(dp, c_right[s], n)
                             if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                                 peak_f[r, i] = fp
                                 peak_ft[r, i] = t + theta * h
                         elif falls(w0, w1):
-                            d0 = hx0[i] - hx0[i + 1]
-                            d1 = hx1[i] - hx1[i + 1]
+                            d0 = compression(hx0[i] - hx0[i + 1], i, pre)  # (the static overlap included)
+                            d1 = compression(hx1[i] - hx1[i + 1], i, pre)
                             if hermite_max_estimate(d0, w0, d1, w1, h) >= SCREEN * peak_d[r, i]:
                                 theta = root(ROOT_APPROACH, i, M, w0, w1, hx0, hv0, ha0, hx1, hv1, ha1, h, 0.0, 0.0, 0.0,
-                                             0.0, 0.0, law)
-                                dp = (dense_x(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                      - dense_x(i + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta))
+                                             0.0, 0.0, law, pre)
+                                dp = compression(dense_x(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
+                                                 - dense_x(i + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), i, pre)
                                 fp = contact_force(dp, c_right[s], n)
                                 if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                                     peak_f[r, i] = fp
@@ -494,15 +526,16 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                 grid_v[r, g, q] = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                         if wall and i == M - 2:
                             if DAMPED:
-                                grid_f[r, g] = dense_law_force(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law)
+                                grid_f[r, g] = dense_law_force(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law,
+                                                               pre)
                             elif VERLET:
-                                grid_f[r, g] = contact_force(
+                                grid_f[r, g] = contact_force(compression(
                                     hermite3(hx0[M - 2], hv0[M - 2], hx1[M - 2], hv1[M - 2], h, theta)
-                                    - hermite3(hx0[M - 1], hv0[M - 1], hx1[M - 1], hv1[M - 1], h, theta), c_right[s], n)
+                                    - hermite3(hx0[M - 1], hv0[M - 1], hx1[M - 1], hv1[M - 1], h, theta), M - 2, pre), c_right[s], n)
                             else:
-                                grid_f[r, g] = contact_force(
+                                grid_f[r, g] = contact_force(compression(
                                     dense_x(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                    - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), c_right[s], n)
+                                    - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), M - 2, pre), c_right[s], n)
                     g += 1
                 before = front
                 front = max(front, group_last(found, red_q, lane))
@@ -516,7 +549,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                     j_weak = group_last(j_weak, red_f, lane)
 
             # The trailing window's cut: granules lo..new_lo-1 leave it with the potential of the contacts
-            # among them (the contact at the new edge is open, or holds less than CUT_FORCE).
+            # among them (the contact at the new edge is open, or holds less than CUT_FORCE). (Never in a
+            # precompressed chain, which runs without a trailing window: its contacts do not open.)
             new_lo = lo
             cut = False
             if j_open >= 0:
@@ -543,7 +577,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 spent += step_spent
                 pw[0] = pw[6]
                 if cut:  # the first stage without the contact at the window's new edge (as the CPU's)
-                    pw[0] = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0)
+                    pw[0] = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0, pre)
             t = t_new
             n_acc += 1
 
@@ -595,7 +629,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 peak_v[r, q] = v[s]
                 peak_t[r, q] = t
             if i >= lo and i < M - 1:
-                d = x[s] - hx0[i + 1]
+                d = compression(x[s] - hx0[i + 1], i, pre)
                 if d > 0.0 and v[s] - hv0[i + 1] > 0.0:
                     # (a damped force clamped at 0 never beats the recorded peak, which is >= 0)
                     f = law_force(d, v[s] - hv0[i + 1], c_right[s], law) if DAMPED else contact_force(d, c_right[s], n)
