@@ -14,7 +14,10 @@ registers, the bytes of spill stores and loads and of shared memory, the chains 
 registers and shared memory allow, and that number as a ratio to the default kernel's (RKN4, L = 32, warp
 shuffles and votes, G = 1: the paper's N = 26 chains), measured in the same run. Also a digest of each
 kernel's PTX (symbols and comments removed): equal digests are the same machine code, which is how a change
-to one method's code can be shown to leave another's kernel untouched.
+to one method's code can be shown to leave another's kernel untouched. Compare a kernel's digests between runs
+of the same ``--methods`` and ``--caps``: a kernel's PTX also depends on what the process compiled before it
+(measured: the G = 2 kernel's digest differs when the capped kernels are not compiled first), and the default
+kernel, always compiled first, has one digest whatever the lists.
 
 Needs Numba's CUDA target and NVIDIA's compiler wheels (NVVM, ptxas), which ``pip install
 "numba-cuda[cu12]"`` brings (a few hundred MB; not in granchain's own extras, which run on a GPU machine's

@@ -212,6 +212,22 @@ def rest_ahead(threads: int) -> dict:
             "velocities": np.asarray(r.velocities).tolist(), "residual": residual.tolist()}
 
 
+def striker(threads: int) -> dict:
+    """A decorated chain precompressed by F0 = 1e-3, struck by a striker of mass 2 and ending in a wall, simulated to
+    t = 15 with RKN4(1e-10) on the GPU backend and on the CPU's: each one's steps, peaks and energy error."""
+    import granchain as gc
+    from granchain.backends.cuda import CudaBackend
+
+    chain = gc.decorated([0.3, 0.05, 0.2]).with_precompression(1e-3).with_striker(mass=2.0).with_wall()
+    res = {}
+    for name, kw in (("cuda", {"backend": CudaBackend(threads)}), ("cpu", {})):
+        r = gc.simulate(chain, gc.RKN4(1e-10, 1e-13), t_grid=np.linspace(0.0, 12.0, 25), t_max=15.0, **kw)
+        res[name] = {"status": int(r.status), "n_steps": int(r.n_steps), "peak_velocity": r.peak_velocity.tolist(),
+                     "peak_force": np.asarray(r.peak_force).tolist(), "energy_error": float(r.energy_error),
+                     "wall_force": np.asarray(r.wall_force).tolist()}
+    return res
+
+
 def unavailable() -> dict:
     """Without the simulator and without a GPU: the error a user gets."""
     from granchain.backends import BackendUnavailable, get_backend
@@ -249,7 +265,8 @@ def model_ensemble(threads: int, store: str, model: str = "damped") -> dict:
 
 
 CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "votes": votes, "refusals": refusals,
-          "unavailable": unavailable, "model_ensemble": model_ensemble, "rest_ahead": rest_ahead}
+          "unavailable": unavailable, "model_ensemble": model_ensemble, "rest_ahead": rest_ahead,
+          "striker": striker}
 
 if __name__ == "__main__":
     name, args = sys.argv[1], [json.loads(a) for a in sys.argv[2:]]

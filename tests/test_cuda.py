@@ -210,6 +210,17 @@ def test_precompressed_granules_ahead_stay_exactly_at_rest():
     assert any(r != 0.0 for r in res["residual"])
 
 
+def test_a_striker_on_a_loaded_chain_against_a_wall_is_the_cpus():
+    """Real contacts together on the GPU (one thread per chain): a striker of twice the first granule's mass, a
+    static load and a wall: the CPU's steps, peaks, wall force and energy balance to rounding."""
+    res = sim("striker", 1)
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert gpu["status"] == cpu["status"] == 0 and gpu["n_steps"] == cpu["n_steps"]
+    for key in ("peak_velocity", "peak_force", "wall_force"):
+        np.testing.assert_allclose(gpu[key], cpu[key], rtol=1e-12, atol=1e-14, err_msg=key)
+    assert abs(gpu["energy_error"] - cpu["energy_error"]) < 1e-12
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("threads, exchange, args", [
     (1, "shared", (4, 2, 16.0, False, True, True, "decorated", "decorated", None)),

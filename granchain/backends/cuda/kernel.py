@@ -67,7 +67,7 @@ from .device import (
     static_state,
 )
 from .exchange import make_exchange
-from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, make_stages, make_velocity
+from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, make_stages, make_velocity, over_tolerance
 
 
 #: Layout of the float settings array ``prm`` the kernel reads.
@@ -359,7 +359,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 step_spent = group_sum(dissipated(pw, h), red_w, lane)
                 if not FIXED:
                     spent_error = group_sum(dissipated_error(pw, h), red_z, lane)
-                    err = max(err, abs(spent_error) / (atol + rtol * abs(spent)))
+                    err = max(err, over_tolerance(spent_error, spent, rtol, atol))
             if SHUFFLE:  # the last two granules' new state, from the threads that hold them
                 x_m2 = 0.0
                 v_m2 = 0.0

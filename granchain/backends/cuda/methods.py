@@ -139,6 +139,8 @@ def make_stages(method: str, forces, G: int, damped: bool = False):
 #: the group sums the results (``exchange.group_sum``, in a fixed order), where the CPU sums the contacts first.
 dissipated = cuda.jit(device=True)(_dp5.dissipated.py_func)
 dissipated_error = cuda.jit(device=True)(_dp5.dissipated_error.py_func)
+#: ``kernels.dp5.over_tolerance``: the dissipated energy's summed error over its tolerance, the CPU's own function.
+over_tolerance = cuda.jit(device=True)(_dp5.over_tolerance.py_func)
 
 
 def make_velocity(method: str):

@@ -146,7 +146,14 @@ def dissipated_error_ratio(Pd, h, e, rtol, atol):
     while the power c delta^(n-1) |d(delta)/dt| it dissipates runs to 0 with a kink where the contact
     opens, and the quadrature misses it (measured: 3e-4 of the dissipated energy of one collision,
     whatever the tolerance)."""
-    return abs(dissipated_error(Pd, h)) / (atol + rtol * abs(e))
+    return over_tolerance(dissipated_error(Pd, h), e, rtol, atol)
+
+
+@njit(**JIT_INLINE)
+def over_tolerance(error, e, rtol, atol):
+    """|``error``| over the tolerance atol + rtol |e| of a component of value ``e`` (the GPU kernels call it with the
+    dissipated energy's error summed over a chain's threads)."""
+    return abs(error) / (atol + rtol * abs(e))
 
 
 @njit(**JIT_INLINE)
