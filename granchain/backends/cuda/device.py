@@ -107,6 +107,14 @@ def dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t):
 
 
 @cuda.jit(device=True)
+def dense_compression(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, pre):
+    """``kernels.dense.dense_compression``: contact k's compression at theta = t on the dense output, its static
+    overlap included (``pre``: the static state of a precompressed chain, or None)."""
+    return compression(dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
+                       k, pre)
+
+
+@cuda.jit(device=True)
 def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, n, pre):
     """Acceleration of granule k from the dense-output positions of it and its neighbours (``pre``: the static
     state of a precompressed chain, or None)."""
@@ -202,8 +210,7 @@ def law_power(d, w, f, c, law):
 def dense_law_force(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c, law, pre):
     """``kernels.dense.dense_force`` of a damped law: contact k's force (stiffness ``c``) at theta = t, from the
     dense output's compression (its static overlap included) and its rate."""
-    d = compression(dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
-                    k, pre)
+    d = dense_compression(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, pre)
     return law_force(d, dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
                      c, law)
 
@@ -231,8 +238,7 @@ def dense_force_rate(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, c_
     ``c_after``: contact k + 1's, 0 past the chain)."""
     dw = (damped_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_before, c_k, inv_m0, law, pre)
           - damped_acceleration(k + 1, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_k, c_after, inv_m1, law, pre))
-    d = compression(dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t),
-                    k, pre)
+    d = dense_compression(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, pre)
     w = dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
     return force_rate(d, w, dw, c_k, law)
 

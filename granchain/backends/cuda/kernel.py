@@ -55,9 +55,9 @@ from .device import (
     compression,
     contact_force,
     cut_target,
+    dense_compression,
     dense_law_force,
     dense_v,
-    dense_x,
     falls,
     force_rate,
     hermite3,
@@ -503,8 +503,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                             if hermite_max_estimate(d0, w0, d1, w1, h) >= SCREEN * peak_d[r, i]:
                                 theta = root(ROOT_APPROACH, i, M, w0, w1, hx0, hv0, ha0, hx1, hv1, ha1, h, 0.0, 0.0, 0.0,
                                              0.0, 0.0, law, pre)
-                                dp = compression(dense_x(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                                 - dense_x(i + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), i, pre)
+                                dp = dense_compression(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre)
                                 fp = contact_force(dp, c_right[s], n)
                                 if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                                     peak_f[r, i] = fp
@@ -533,9 +532,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                     hermite3(hx0[M - 2], hv0[M - 2], hx1[M - 2], hv1[M - 2], h, theta)
                                     - hermite3(hx0[M - 1], hv0[M - 1], hx1[M - 1], hv1[M - 1], h, theta), M - 2, pre), c_right[s], n)
                             else:
-                                grid_f[r, g] = contact_force(compression(
-                                    dense_x(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                                    - dense_x(M - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta), M - 2, pre), c_right[s], n)
+                                grid_f[r, g] = contact_force(
+                                    dense_compression(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre), c_right[s], n)
                     g += 1
                 before = front
                 front = max(front, group_last(found, red_q, lane))
