@@ -49,6 +49,11 @@ the same run:
    static_force=0.01, wall=True)``: every chain runs to its time limit, the loaded contacts never open), as part 6
    measures it, with ``[7 agree]``: the peaks' and the wall's peak force's largest differences. Not a target.
 
+8. ``[8 yielding]``: the same set with Thornton's elastic-plastic contacts (yield speed 0.3: the struck
+   granule's first contacts yield, the far ones stay elastic), DP5 on both backends, as part 6 measures it, with
+   ``[8 agree]``: the peaks' and the plastic work's largest differences. Not a target: what yielding contacts,
+   each with its history and a step retaken at every turn from loading to unloading, cost on the GPU.
+
 ``[summary]``: decorated integration <= 1.5 s; >= 8x the peer; >= 20x CPU-16; reproduce integration
 <= 10 s, wall <= 60 s; CPU >= 13x on 16 threads; each PASS/FAIL with its number (MISSING where the
 part that measures it failed or was skipped).
@@ -98,6 +103,8 @@ PEAK_T_ATOL = 1e-5
 
 #: Part 7's precompression F0 (rescaled: a fiftieth of the pulse's peak contact force, ~0.5).
 LOAD = 0.01
+#: Part 8's yield speed (rescaled: the relative impact speed at which two reference granules first yield).
+YIELD_SPEED = 0.3
 
 #: The targets of the summary: (label, comparison, threshold).
 TARGETS = {
@@ -687,10 +694,18 @@ def part_loaded(run: Run) -> None:
                   f"decorated N={run.sizes.n_large}, precompressed F0 = {LOAD:g}, wall")
 
 
+def part_yielding(run: Run) -> None:
+    import granchain as gc
+
+    real_contacts(run, "8 yielding", gc.RandomDecorated(run.sizes.n_large, contact=gc.ElasticPlastic(YIELD_SPEED)),
+                  f"decorated N={run.sizes.n_large}, Thornton's yielding contacts (yield speed {YIELD_SPEED:g})")
+
+
 def real_contacts(run: Run, key: str, family, label: str) -> None:
-    """Parts 6 and 7: ``family`` (a chain of real contacts) on the GPU backend and on the CPU's 16 threads, each with
+    """Parts 6, 7 and 8: ``family`` (a chain of real contacts) on the GPU backend and on the CPU's 16 threads, each with
     its default method, ``run.sizes.damped`` realisations: the wall times, their ratio, and the largest differences
-    of the two backends' peaks and of the dissipated energy (damped) or the wall's peak force (against a wall)."""
+    of the two backends' peaks and of the dissipated energy (damped; yielding: the plastic work) or the wall's peak
+    force (against a wall)."""
     import numba
 
     s = run.sizes
@@ -741,7 +756,7 @@ def summary(run: Run) -> None:
 
 
 PARTS = {1: ("gpu", part_gpu), 2: ("peer", part_peer), 3: ("cpu", part_cpu), 4: ("reproduce", part_reproduce),
-         5: ("agree", part_agree), 6: ("damped", part_damped), 7: ("loaded", part_loaded)}
+         5: ("agree", part_agree), 6: ("damped", part_damped), 7: ("loaded", part_loaded), 8: ("yielding", part_yielding)}
 
 
 def main(argv=None) -> int:
@@ -750,8 +765,8 @@ def main(argv=None) -> int:
                                                          "checks the script, measures nothing")
     ap.add_argument("--stub", action="store_true", help="a stand-in for the CUDA backend (the CPU ensemble, timed): "
                                                         "automatic with --smoke where granchain.backends.cuda is missing")
-    ap.add_argument("--parts", default="1,2,3,4,5,6,7", help="which parts to run, comma-separated (default all: "
-                                                          "1,2,3,4,5,6,7)")
+    ap.add_argument("--parts", default="1,2,3,4,5,6,7,8", help="which parts to run, comma-separated (default all: "
+                                                            "1,2,3,4,5,6,7,8)")
     ap.add_argument("--layouts", default=None, help="part 1's layouts, comma-separated: threads per chain, then "
                                                     "optionally /shuffle or /shared, /REGS (a register cap) and "
                                                     "/butterfly (no warp votes); default "
@@ -762,9 +777,9 @@ def main(argv=None) -> int:
     try:
         parts = tuple(sorted({int(p) for p in args.parts.split(",") if p.strip()}))
     except ValueError:
-        ap.error(f"--parts must be part numbers 1-7 separated by commas, got {args.parts!r}")
+        ap.error(f"--parts must be part numbers 1-8 separated by commas, got {args.parts!r}")
     if not parts or any(p not in PARTS for p in parts):
-        ap.error(f"--parts must be part numbers 1-7 separated by commas, got {args.parts!r}")
+        ap.error(f"--parts must be part numbers 1-8 separated by commas, got {args.parts!r}")
     sizes = SMOKE if args.smoke else FULL
     if args.budget is not None:
         if not args.budget > 0:

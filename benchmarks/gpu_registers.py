@@ -123,26 +123,29 @@ def _compile_for(cc):
     dispatcher.get_current_device = lambda: _Device()
 
 
-def signature():
-    """The kernel's argument types as ``CudaBackend._run`` passes them (C-contiguous device arrays)."""
-    from numba import float64, int64
+def signature(plastic: bool = False):
+    """The kernel's argument types as ``CudaBackend._run`` passes them (C-contiguous device arrays; the yielding
+    contacts' histories, or an empty tuple for the other kernels)."""
+    from numba import float64, int64, typeof
 
     f1, f2, f3, i1 = float64[::1], float64[:, ::1], float64[:, :, ::1], int64[::1]
     return (f2, f2, f1, f1, i1, i1, f1, f1, f1,  # masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, ends, prm
             f2, f2, f2, f2, f2, f3, f2,  # peak_v, peak_t, peak_f, peak_ft, peak_d, grid_v, grid_f
-            i1, i1, i1, f1, f1, i1, f1, f1, f2, f2)  # status, steps, rejected, t_end, exit, lo, frozen, dissipated, x, v
+            i1, i1, i1, f1, f1, i1, f1, f1, f2, f2,  # status, steps, rejected, t_end, exit, lo, frozen, dissipated, x, v
+            f2 if plastic else typeof(()))  # history
 
 
 def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxas: str, fixed: bool = False,
-           damped: bool = False, precompressed: bool = False) -> dict:
+           damped: bool = False, precompressed: bool = False, plastic: bool = False) -> dict:
     """Compile one kernel to PTX (NVVM) and assemble it (ptxas -v): its resources and digest."""
     from numba import cuda
 
     from granchain.backends.cuda import BLOCK_THREADS
     from granchain.backends.cuda.kernel import make_kernel
 
-    kernel = make_kernel(L, G, cap, exchange == "shuffle", exchange == "shuffle", method, fixed, damped, precompressed)
-    ptx, _ = cuda.compile_ptx(kernel.py_func, signature(), cc=tuple(cc))
+    kernel = make_kernel(L, G, cap, exchange == "shuffle", exchange == "shuffle", method, fixed, damped, precompressed,
+                         plastic)
+    ptx, _ = cuda.compile_ptx(kernel.py_func, signature(plastic), cc=tuple(cc))
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "kernel.ptx")
         with open(path, "w") as f:
@@ -159,10 +162,11 @@ def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxa
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cc", default="9.0", help="compute capability, e.g. 9.0 (H100, H200) or 8.0 (A100); default 9.0")
-    ap.add_argument("--methods", default="rkn4,dp5,verlet,dp5-damped,rkn4-precompressed",
+    ap.add_argument("--methods", default="rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic",
                     help="methods, comma-separated; a suffix -damped: for contacts that dissipate (DP5 only), "
-                         "-precompressed: for precompressed chains, both in that order (default "
-                         "rkn4,dp5,verlet,dp5-damped,rkn4-precompressed)")
+                         "-plastic: for contacts that yield (DP5 only, instead of -damped), -precompressed: for "
+                         "precompressed chains, after the others (default "
+                         "rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic)")
     ap.add_argument("--caps", default="168,128,96", help="register caps tried on the default layout (default 168,128,96)")
     args = ap.parse_args(argv)
     try:
@@ -191,7 +195,8 @@ def main(argv=None) -> int:
         if method not in methods:
             continue
         name, damped, precompressed = method.partition("-")[0], "-damped" in method, method.endswith("-precompressed")
-        r = report(name, L, exchange, G, cap, cc, ptxas, damped=damped, precompressed=precompressed)
+        r = report(name, L, exchange, G, cap, cc, ptxas, damped=damped, precompressed=precompressed,
+                   plastic="-plastic" in method)
         base = r if base is None else base
         print(f"[registers sm_{cc[0]}{cc[1]}] {method} L={L} {exchange} G={G} cap {cap or 'none'}: "
               f"{r['registers']} registers, spills {r['spill_stores']} B stored / {r['spill_loads']} B loaded, "

@@ -57,14 +57,15 @@ def integrator_of(spec: str):
 
 def contact_of(spec: str | None):
     """The contact law named by ``spec``: None (the paper's elastic one), "kuwabara-kono:GAMMA" (clamped),
-    "kuwabara-kono-unclamped:GAMMA" or "viscous:GAMMA" (unclamped, the authors' form)."""
+    "kuwabara-kono-unclamped:GAMMA", "viscous:GAMMA" (unclamped, the authors' form) or "plastic:YIELD_SPEED"
+    (Thornton's elastic-plastic contacts)."""
     import granchain as gc
 
     if spec is None:
         return None
-    name, _, gamma = spec.partition(":")
+    name, _, value = spec.partition(":")
     return {"kuwabara-kono": lambda g: gc.Viscoelastic(g), "kuwabara-kono-unclamped": lambda g: gc.Viscoelastic(g, clamp=False),
-            "viscous": lambda g: gc.Viscous(g)}[name](float(gamma))
+            "viscous": lambda g: gc.Viscous(g), "plastic": lambda v: gc.ElasticPlastic(v)}[name](float(value))
 
 
 def run_batch(backend, n_large: int, realizations: int, t_end: float, kind: str = "decorated", pulse_end=None,
@@ -177,7 +178,8 @@ def refusals() -> dict:
     chain = gc.decorated([0.3, 0.05])
     cases = {
         "dop853": lambda: gc.simulate(chain, "dop853", backend=backend),
-        "yielding contacts": lambda: gc.simulate(chain.replace(contact=gc.ElasticPlastic(0.5)), "dp5", backend=backend),
+        "yielding contacts with RKN4": lambda: gc.simulate(chain.replace(contact=gc.ElasticPlastic(0.5)), "rkn4",
+                                                          backend=backend),
         "damping with RKN4": lambda: gc.simulate(chain.with_dissipation(0.1), "rkn4", backend=backend),
         "sensors": lambda: gc.simulate(gc.decorated([0.3, 0.05, 0.3]), "rkn4", backend=backend, sensors=[2],
                                        t_grid=np.linspace(0, 5, 6)),
@@ -241,7 +243,8 @@ def unavailable() -> dict:
 
 def model_ensemble(threads: int, store: str, model: str = "damped") -> dict:
     """``run_ensemble`` of a family of real contacts (``RandomDecorated(3)``, both chain kinds, 3 realisations;
-    ``model`` "damped": Kuwabara-Kono contacts, "precompressed": a static load F0 = 1e-3 and a wall) with the GPU
+    ``model`` "damped": Kuwabara-Kono contacts, "precompressed": a static load F0 = 1e-3 and a wall, "plastic":
+    Thornton's yielding contacts, yield speed 0.3) with the GPU
     backend, written to ``store`` and read back, and the same on the CPU in memory: each one's integrators,
     dissipated energies, energy errors, peak velocities and end times (and, with a wall, its peak force)."""
     import xarray as xr
@@ -251,6 +254,8 @@ def model_ensemble(threads: int, store: str, model: str = "damped") -> dict:
 
     if model == "damped":
         family = gc.RandomDecorated(3, contact=gc.Viscoelastic(0.05))
+    elif model == "plastic":
+        family = gc.RandomDecorated(3, contact=gc.ElasticPlastic(0.3))
     else:
         family = gc.RandomDecorated(3, static_force=1e-3, wall=True)
     kw = {"realizations": 3, "chains": "both", "progress": False, "pulse_window": "full"}

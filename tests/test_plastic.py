@@ -229,14 +229,29 @@ def test_bad_laws_say_what_to_change(bad, match):
 
 
 def test_methods_and_backends_without_the_history_refuse_it():
+    """RKN4 and Verlet (methods for x'' = f(x)) refuse a force with memory, saying so (not that it reads
+    velocities); a backend that carries no per-contact state refuses the law, naming the reference that runs it.
+    The GPU backend carries the histories: it accepts the law with DP5 and refuses it with RKN4, as the CPU does."""
+    from granchain.backends import Backend
+
     chain = gc.monodisperse(5).replace(contact=ElasticPlastic(0.1))
     for integrator in (gc.RKN4(), gc.Verlet(0.001)):
-        with pytest.raises(ValueError, match="positions only"):
+        with pytest.raises(ValueError, match="positions only; the contact law .* remembers each contact's largest overlap"):
             gc.simulate(chain, integrator)
-    with pytest.raises(ValueError, match="no kernel for the contact law"):
-        from granchain.backends.cuda import CudaBackend
 
-        CudaBackend.check(CudaBackend.__new__(CudaBackend), gc.RKN4.__base__(), chain)
+    class Forgetful(Backend):
+        name = "forgetful"
+        law_forms = None
+
+    with pytest.raises(ValueError, match="carries no per-contact history.*DOP853"):
+        Forgetful().check(gc.DP5(), chain)
+    Forgetful().check(gc.DP5(), gc.monodisperse(5))  # (negative control: an elastic chain needs no history)
+    from granchain.backends.cuda import CudaBackend
+
+    gpu = CudaBackend.__new__(CudaBackend)  # (its checks only: no GPU needed)
+    CudaBackend.check(gpu, gc.DP5(), chain)
+    with pytest.raises(ValueError, match="positions only"):
+        CudaBackend.check(gpu, gc.RKN4(), chain)
 
 
 def test_record_family_store_and_resume(tmp_path):

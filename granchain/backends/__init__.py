@@ -160,9 +160,7 @@ class Backend:
     def check(self, integrator, chain) -> None:
         """Refuse an integrator whose requirements the chain's model does not meet, and a contact law
         this backend has no code for (rather than run it as another law), saying what to change."""
-        if integrator.needs_conservative_forces and not chain.contact.conservative:
-            raise ValueError(f"{integrator.name} integrates x'' = f(x) and needs forces that depend on positions only; "
-                             f"the contact law {chain.contact!r} depends on velocities: use DP5 or DOP853")
+        integrator.check_law(chain.contact)
         if self.law_forms is not None and type(chain.contact).__dict__.get("form") not in self.law_forms:
             raise ValueError(f"the {self.name} backend has no code for the contact law {chain.contact!r}; it runs "
                              f"the laws of forms {', '.join(self.law_forms)} (the SciPy reference, "

@@ -189,9 +189,8 @@ class BatchEvaluator:
         self.objective.check(space.wall)
         self.objective.bind(space.granules)  # e.g. a sensor's contact must exist in these chains
         self.integrator = default_integrator(space, contact) if integrator is None else get_integrator(integrator)
-        if contact is not None and self.integrator.needs_conservative_forces and not contact.conservative:
-            raise ValueError(f"{self.integrator.name} integrates x'' = f(x) and needs forces that depend on positions only; "
-                             f"the contact law {contact!r} depends on velocities: use DP5 (the default for it) or DOP853")
+        if contact is not None:
+            self.integrator.check_law(contact, hint=" (the default for it)")
         methods = _backend.default_methods(_backend.resolve(self.backend))
         if integrator is None and methods is not None and self.integrator.name not in methods and contact is None:
             # a backend whose defaults exclude it (the GPU's is RKN4, measured there): the decorated chains' method,

@@ -138,9 +138,7 @@ class EnsembleSpec:
                     per_chain = {c: (i if i.name in methods else fallback) for c, i in per_chain.items()}
         law = self.family.contact_law
         for c, integ in per_chain.items():  # refused here, before a store exists
-            if integ.needs_conservative_forces and not law.conservative:
-                raise ValueError(f"{integ.name} integrates x'' = f(x) and needs forces that depend on positions only; the "
-                                 f"family's contact law {law!r} depends on velocities: use DP5 (the default for it) or DOP853")
+            integ.check_law(law, "the family's contact law", " (the default for it)")
         set_("integrator", per_chain[self.chains[0]])
         set_("chain_integrators", per_chain)
         grid = self.family.default_time_grid() if self.t_grid is None else np.asarray(self.t_grid, dtype=float).reshape(-1)

@@ -100,6 +100,16 @@ class Integrator:
         """JSON-able record of the integrator and all its settings (stored with ensembles)."""
         return {"name": self.name, **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)}}
 
+    def check_law(self, law, whose: str = "the contact law", hint: str = "") -> None:
+        """Refuse a contact law whose force is not a function of the positions alone (it reads velocities, or
+        each contact's history) where this is a method for x'' = f(x), saying which methods integrate it
+        (``hint``: added after DP5, e.g. " (the default for it)"; ``whose``: how the message names the law)."""
+        if self.needs_conservative_forces and not law.conservative:
+            why = ("remembers each contact's largest overlap (its force depends on that history)"
+                   if getattr(law, "history", False) else "depends on velocities")
+            raise ValueError(f"{self.name} integrates x'' = f(x) and needs forces that depend on positions only; "
+                             f"{whose} {law!r} {why}: use DP5{hint} or DOP853")
+
     def check_chains(self, masses, stiffness, n, initial_velocity) -> None:
         """Called with the chains (rows) before every integration: warn or refuse where the method
         cannot work (e.g. a fixed step beyond its stability limit). Nothing by default."""

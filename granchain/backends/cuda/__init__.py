@@ -11,8 +11,9 @@ results agree with the CPU backend's within the accuracy contract (not bit for b
 multiply-adds round differently, and DP5's peaks are read on another interpolant, ``kernel.make_kernel``),
 and its sums of the averaged pulse are fixed-point integers added in a fixed order, so a run repeated
 gives the same bits. Precompressed chains run as the CPU runs them (in displacements from the static state,
-to their time limit). What it has no kernel for (contacts that yield, the aligned pulse, force sensors on the
-grid) is refused with an error that names the CPU backend.
+to their time limit), and so do contacts that yield (Thornton's elastic-plastic law, with DP5: each contact's
+history kept on the GPU, a step retaken where a contact turns from loading to unloading). What it has no kernel
+for (the aligned pulse, force sensors on the grid) is refused with an error that names the CPU backend.
 
 Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, which installs
 ``numba-cuda``). Under ``NUMBA_ENABLE_CUDASIM=1`` the same kernels run in Numba's simulator on a CPU
@@ -56,7 +57,7 @@ def available() -> tuple[bool, str]:
 
 
 class CudaBackend(Backend):
-    """RKN4, DP5 and Verlet for elastic chains, DP5 for damped ones, on an NVIDIA GPU; ``threads_per_chain``
+    """RKN4, DP5 and Verlet for elastic chains, DP5 for damped and yielding ones, on an NVIDIA GPU; ``threads_per_chain``
     chooses the layout (see :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp
     shuffles, the default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's
     integer reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
@@ -64,8 +65,11 @@ class CudaBackend(Backend):
     the device time of the integration and the reduction, synchronised, transfers excluded."""
 
     name = "cuda"
-    #: The elastic power law, and the damped laws DP5 integrates (``kernel.make_kernel``'s ``damped``).
-    law_forms = ("power-law", "kuwabara-kono", "viscous")
+    #: The elastic power law, the damped laws DP5 integrates (``kernel.make_kernel``'s ``damped``) and Thornton's
+    #: yielding contacts (its ``plastic``).
+    law_forms = ("power-law", "kuwabara-kono", "viscous", "thornton")
+    #: Yielding contacts' histories live on the GPU and come back with the final state (``integrate``'s ``history``).
+    carries_history = True
     #: The integrators it has kernels for (``Integrator.name``).
     methods = ("rkn4", "dp5", "verlet")
     #: The methods a caller's default may pick on it: RKN4 alone, the one measured on a GPU
@@ -104,12 +108,13 @@ class CudaBackend(Backend):
     # ------------------------------------------------------------------ what it runs
     def check(self, integrator, chain) -> None:
         """RKN4, DP5 or Verlet on an elastic (power-law) chain, or DP5 on a damped one (Kuwabara-Kono or
-        viscous contacts), precompressed or not, at rest ahead of the pulse; then :meth:`Backend.check` (which
-        refuses RKN4 and Verlet for damped contacts). Each refusal names the CPU backend, which runs all of these."""
+        viscous contacts) or a yielding one (Thornton's), precompressed or not, at rest ahead of the pulse; then
+        :meth:`Backend.check` (which refuses RKN4 and Verlet for damped and yielding contacts). Each refusal names
+        the CPU backend, which runs all of these."""
         cpu = "; use the CPU backend (backend='cpu')"
         if type(chain.contact).__dict__.get("form") not in self.law_forms:
             raise ValueError(f"the cuda backend has no kernel for the contact law {chain.contact!r} (elastic power-law, "
-                             f"Kuwabara-Kono viscoelastic and viscous contacts only){cpu}")
+                             f"Kuwabara-Kono viscoelastic, viscous and Thornton's elastic-plastic contacts only){cpu}")
         if integrator.name not in self.methods:
             raise ValueError(f"the cuda backend runs RKN4, DP5 and Verlet (granchain.RKN4, granchain.DP5, "
                              f"granchain.Verlet), not {integrator.name}{cpu}")
@@ -118,22 +123,23 @@ class CudaBackend(Backend):
                              f"{chain.initial!r} does not{cpu}")
         super().check(integrator, chain)
 
-    def _kernel(self, M: int, method: str, fixed: bool, damped: bool, precompressed: bool):
+    def _kernel(self, M: int, method: str, fixed: bool, damped: bool, precompressed: bool, plastic: bool = False):
         from .kernel import make_kernel
 
         L = self.threads_per_chain
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
-        key = (L, G, method, fixed, damped, precompressed)
+        key = (L, G, method, fixed, damped, precompressed, plastic)
         if key not in self._kernels:
             self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed,
-                                             damped, precompressed)
+                                             damped, precompressed, plastic)
         return L, G, self._kernels[key]
 
     # ------------------------------------------------------------------ runs
     def integrate(self, integrator, chain, x, v, *, t_grid, t_max, stop_at_exit, controls, sensed=None, history=None):
-        """:meth:`Backend.integrate` of one chain: a batch of one row on the GPU. ``history`` (a law with memory)
-        is refused by :meth:`check`: the GPU carries no per-contact state."""
+        """:meth:`Backend.integrate` of one chain: a batch of one row on the GPU. ``history`` (yielding contacts):
+        the contacts' yield overlaps on entry (``history_state``: several materials give each contact its own), their
+        largest overlaps on return, as the CPU's."""
         from ..kernels.records import (
             INFO_DISSIPATED,
             INFO_EXIT,
@@ -152,7 +158,8 @@ class CudaBackend(Backend):
         if np.any(x != 0.0) or np.count_nonzero(v[1:]):
             raise ValueError("the cuda backend starts from rest with granule 1 struck; use the CPU backend (backend='cpu')")
         res = self._run(integrator, chain, chain.masses[None], chain.stiffness[None], np.array([v[0]]),
-                        chain.observed, t_grid, np.array([float(t_max)]), stop_at_exit, controls, None)
+                        chain.observed, t_grid, np.array([float(t_max)]), stop_at_exit, controls, None,
+                        history=None if history is None else np.asarray(history, dtype=float)[None])
         info = np.zeros(INFO_SIZE)
         info[INFO_T_END], info[INFO_STEPS] = res["t_end"][0], res["n_steps"][0]
         info[INFO_REJECTED] = res["n_rejected"][0]
@@ -160,6 +167,8 @@ class CudaBackend(Backend):
         info[INFO_WINDOW_START], info[INFO_FROZEN_POTENTIAL] = res["window_start"][0], res["frozen_potential"][0]
         info[INFO_DISSIPATED] = res["dissipated_energy"][0]
         x[:], v[:] = res["positions"][0], res["velocities"][0]
+        if history is not None and res["history"] is not None:
+            history[:] = res["history"][0]
         grid_f = res["wall_force"][0] if res["wall_force"] is not None else np.zeros(t_grid.size)
         return (int(res["status"][0]), info, res["peak_velocity"][0], res["peak_time"][0], res["velocity"][0],
                 res["peak_force"][0], res["peak_force_time"][0], grid_f, np.zeros((t_grid.size, 0)))
@@ -194,11 +203,15 @@ class CudaBackend(Backend):
         out["n_valid"][0] += int(np.count_nonzero(res["status"] == 0))
 
     def _run(self, integrator, chain, masses, stiffness, v0, observed, t_grid, t_max, stop_at_exit, controls,
-             pulse_end, *, scale=None, sums=None) -> dict:
+             pulse_end, *, scale=None, sums=None, history=None) -> dict:
         """Integrate the rows on the GPU in launches of at most :data:`GRID_BYTES` of grid velocities. Returns
-        the per-row arrays (and, with ``sums``, adds the averaged pulse's fixed-point sums into it)."""
+        the per-row arrays (and, with ``sums``, adds the averaged pulse's fixed-point sums into it). Yielding
+        contacts: ``history`` (rows x contacts) their yield overlaps (None: c^2 times the law's reference yield
+        overlap, spheres of one material, as the CPU's ensembles), and each row's final histories returned."""
         from numba import cuda
 
+        from ..kernels.forces import DAMPING_VISCOUS
+        from ..numba_backend import model_params
         from .kernel import P_SIZE
 
         ran = effective_integrator(integrator, chain)
@@ -215,26 +228,32 @@ class CudaBackend(Backend):
             fixed = ran.fixed_step is not None
             steps = (ran.rtol, ran.atol, ran.fixed_step if fixed else ran.first_step, ran.relaxed_lag or 0,
                      ran.relaxed_factor, ran.window_lag or 0)
-        law = chain.contact
-        damped = law.gamma > 0.0  # (a damped law with gamma = 0 is the elastic one)
-        prm[:] = (*steps, controls.exit_margin, controls.peak_rtol, controls.max_steps, float(chain.n),
-                  float(bool(stop_at_exit)), float(chain.boundary.wall), float(t_grid[-1]) if T else 0.0,
-                  float(pulse_end is not None), float(law.gamma), float(type(law).__dict__.get("form") == "viscous"),
-                  float(bool(law.clamp)), float(chain.static_force))
+        # The model's values as the CPU kernels take them (``numba_backend.model_params``, the one place they are filled).
+        model = model_params(chain)
+        damped = model.gamma > 0.0  # (a damped law with gamma = 0 is the elastic one)
+        plastic = model.yield_overlap > 0.0  # Thornton's contacts (check: the only law with memory it runs)
+        prm[:] = (*steps, controls.exit_margin, controls.peak_rtol, controls.max_steps, model.n,
+                  float(bool(stop_at_exit)), float(model.wall), float(t_grid[-1]) if T else 0.0,
+                  float(pulse_end is not None), model.gamma, float(model.damping == DAMPING_VISCOUS),
+                  float(model.clamp), model.static_force, model.yield_overlap)
         # A precompressed chain runs without a trailing window (effective_integrator: its loaded far end licenses
         # none), which the kernel's static state relies on (its contacts never leave the integration).
         loaded = chain.precompression.applied
         assert not (loaded and steps[5]), "a precompressed chain runs without a trailing window"
-        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded)
+        # Yielding contacts likewise (effective_integrator): the granules left behind would take their histories.
+        assert not (plastic and (steps[3] or steps[5])), "yielding contacts run without goal-oriented zones"
+        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded, plastic)
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.
         order = longest_first(masses, stiffness)
         masses, stiffness, v0, t_max = masses[order], stiffness[order], np.asarray(v0)[order], np.asarray(t_max)[order]
+        if plastic:
+            history = np.zeros((R, M - 1)) if history is None else np.asarray(history, dtype=float)[order]
         per = max(1, min(R, int(GRID_BYTES // max(1, T * K * 8))))
         const = [cuda.to_device(np.ascontiguousarray(a)) for a in (obs_of, observed, np.asarray(t_grid, float), ends, prm)]
         # (each named as the results name it: ``RunRecord``, the ensembles' schema; the compressions stay on the device)
-        res = {k: [] for k in KERNEL_OUTPUTS if k != "peak_compression"}
+        res = {k: [] for k in KERNEL_OUTPUTS + ("history",) if k != "peak_compression"}
         elapsed = 0.0
         launches = 0
         for start in range(0, R, per):
@@ -250,10 +269,12 @@ class CudaBackend(Backend):
                 d_out[k] = cuda.device_array(r, dtype=np.float64)
             d_out["positions"] = cuda.device_array((r, M), dtype=np.float64)
             d_out["velocities"] = cuda.device_array((r, M), dtype=np.float64)
+            # (in: the yield overlaps; out: the final histories. Other kernels: an empty tuple, no parameter)
+            d_hist = cuda.to_device(np.ascontiguousarray(history[sl])) if plastic else ()
             blocks, threads = (r, L) if L > 1 else (-(-r // BLOCK_THREADS), BLOCK_THREADS)
             cuda.synchronize()
             t0 = time.perf_counter()
-            kernel[blocks, threads](*d_in[:2], d_in[2], d_in[3], *const, *(d_out[k] for k in KERNEL_OUTPUTS))
+            kernel[blocks, threads](*d_in[:2], d_in[2], d_in[3], *const, *(d_out[k] for k in KERNEL_OUTPUTS), d_hist)
             if sums is not None and T and K:
                 d_sv = cuda.to_device(np.zeros((T, K), dtype=np.int64))
                 d_sv2 = cuda.to_device(np.zeros((T, K), dtype=np.int64))
@@ -273,6 +294,10 @@ class CudaBackend(Backend):
                 if k == "velocity" and sums is not None:
                     continue  # reduced on the device
                 if k == "wall_force" and (not wall or sums is not None):
+                    continue
+                if k == "history":
+                    if plastic:
+                        res[k].append(d_hist.copy_to_host())
                     continue
                 res[k].append(d_out[k].copy_to_host())
         self.timings.append({"kernel_s": elapsed, "realizations": R, "launches": launches})
@@ -315,7 +340,20 @@ def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
     (c / n) delta^n (Eq. hertz-1) of the contacts still integrated at the end, and the potential the
     contacts behind the window held when they left it; E_0 = m_1 v_0^2 / 2. In a precompressed chain the
     potential is measured from the static state (``kernels.forces.add_potential``): V(delta0 + D) - V(delta0) - f0 D
-    for each contact, D = x_j - x_{j+1} (Nesterenko 2001, Sec. 1.1)."""
+    for each contact, D = x_j - x_{j+1} (Nesterenko 2001, Sec. 1.1). Yielding contacts: the elastic energy each one
+    gives back depends on its final history, by the CPU's own ``kernels.forces.plastic_energy``, and the plastic
+    work is the dissipated energy."""
+    e0 = 0.5 * masses[:, 0] * v0 * v0
+    if chain.contact.history:
+        from ..kernels.forces import plastic_energy
+        from ..numba_backend import model_params
+
+        params = model_params(chain)
+        rows = zip(res["positions"], res["velocities"], masses, stiffness, res["history"])
+        e1 = np.array([plastic_energy(x, v, np.ascontiguousarray(m), np.ascontiguousarray(c), params, hist)
+                       for x, v, m, c, hist in rows])
+        with np.errstate(invalid="ignore"):
+            return (e1 + res["dissipated_energy"] - e0) / e0
     n = float(chain.n)
     x, v, lo = res["positions"], res["velocities"], res["window_start"]
     finite = np.isfinite(masses)
@@ -329,6 +367,5 @@ def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
     else:
         stored = c * np.maximum(D, 0.0) ** n
     potential = np.sum(np.where(integrated, stored, 0.0), axis=1) / n + res["frozen_potential"]
-    e0 = 0.5 * masses[:, 0] * v0 * v0
     with np.errstate(invalid="ignore"):
         return (kinetic + potential + res["dissipated_energy"] - e0) / e0

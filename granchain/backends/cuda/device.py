@@ -9,10 +9,12 @@ CPU's numbers in Numba's simulator); ``hermite_max_estimate`` is the CPU's own s
 from __future__ import annotations
 
 import math
+import types
 
 from numba import cuda, int32, int64
 
 from ..kernels import dense as _dense
+from ..kernels import forces as _forces
 from ..kernels import verlet as _verlet
 
 FULL_MASK = 0xFFFFFFFF  # every lane of a warp (the shuffle exchange)
@@ -27,6 +29,33 @@ def contact_force(d, c, n):
     if n == 2.0:
         return c * d
     return c * d ** (n - 1.0)
+
+
+def cpu_source(func, **callees):
+    """The CPU kernels' function ``func`` (a Numba dispatcher) compiled for the GPU from its own source, the
+    functions it calls (``callees``, by name) bound to their GPU versions: one text for both targets."""
+    py = func.py_func
+    scope = dict(py.__globals__, **callees)
+    return cuda.jit(device=True)(types.FunctionType(py.__code__, scope, py.__name__, py.__defaults__, py.__closure__))
+
+
+# -- Contacts that yield (C. Thornton, J. Appl. Mech. 64, 383 (1997): ``granchain.model.contacts.ElasticPlastic``) --
+# ``yld`` is the (2, M) array of the contacts' yield overlaps delta_y,j (row 0) and histories, their largest
+# overlaps so far (row 1), or None in a kernel compiled for contacts without memory (pruned as ``pre`` is, below).
+
+#: ``kernels.forces.unloading_curve``, ``plastic_force`` and ``plastic_work``: the CPU's own functions.
+unloading_curve = cpu_source(_forces.unloading_curve)
+plastic_force = cpu_source(_forces.plastic_force, unloading_curve=unloading_curve)
+plastic_work = cpu_source(_forces.plastic_work)
+
+
+@cuda.jit(device=True)
+def elastic_force(d, j, c, n, yld):
+    """The force of contact j (prefactor ``c``) at compression ``d`` by a law of the positions alone: c d^(n-1)
+    (Eq. motion_rescaled), or with ``yld`` Thornton's force from the contact's history (``plastic_force``)."""
+    if yld is None:
+        return contact_force(d, c, n)
+    return plastic_force(d, yld[1, j], c, yld[0, j])
 
 
 # -- A precompressed chain (``kernels.forces``: displacements from the static state) -------------------------
@@ -115,18 +144,18 @@ def dense_compression(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t, pre):
 
 
 @cuda.jit(device=True)
-def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, n, pre):
+def dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, t, c_left, c_right, inv_m, n, pre, yld):
     """Acceleration of granule k from the dense-output positions of it and its neighbours (``pre``: the static
-    state of a precompressed chain, or None)."""
+    state of a precompressed chain, or None; ``yld``: yielding contacts' state, or None)."""
     xk = dense_x(k, hx0, hv0, ha0, hx1, hv1, ha1, h, t)
     left = 0.0
     right = 0.0
     if k > 0:
-        left = dynamic(contact_force(compression(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk, k - 1, pre),
-                                     c_left, n), k - 1, pre)
+        left = dynamic(elastic_force(compression(dense_x(k - 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t) - xk, k - 1, pre),
+                                     k - 1, c_left, n, yld), k - 1, pre)
     if k < M - 1:
-        right = dynamic(contact_force(compression(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), k, pre),
-                                      c_right, n), k, pre)
+        right = dynamic(elastic_force(compression(xk - dense_x(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, t), k, pre),
+                                      k, c_right, n, yld), k, pre)
     return (left - right) * inv_m
 
 
@@ -255,20 +284,21 @@ ROOT_FORCE_RATE = 3
 
 
 @cuda.jit(device=True)
-def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_before, c_k, c_after, inv_m0, inv_m1, law, pre):
+def root(what, k, M, f_lo, f_hi, hx0, hv0, ha0, hx1, hv1, ha1, h, c_before, c_k, c_after, inv_m0, inv_m1, law, pre, yld):
     """First theta in [0, 1] where the followed function ``what`` (the ROOT_* above; f_lo > 0 its value at 0,
     f_hi <= 0 at 1) stops being positive, on the dense output (``kernels.dense.first_root``: Illinois while the
     bracket has a strictly negative end, bisection while it ends on an exact zero). For granule k:
     ``c_before``, ``c_k`` its left and right contacts' stiffness (0 for none), ``inv_m0`` its inverse mass; for
     the rate of contact k's force also ``c_after`` (contact k + 1's) and ``inv_m1`` (granule k + 1's); ``law``
-    the contacts' (n, gamma, viscous, clamp), ``pre`` the static state of a precompressed chain (or None)."""
+    the contacts' (n, gamma, viscous, clamp), ``pre`` the static state of a precompressed chain (or None), ``yld``
+    the yielding contacts' yield overlaps and histories (or None)."""
     lo = 0.0
     hi = 1.0
     side = 0
     for _ in range(200):
         theta = bracket_theta(lo, hi, f_lo, f_hi)
         if what == ROOT_ACCELERATION:
-            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law[0], pre)
+            f = dense_acceleration(k, M, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_before, c_k, inv_m0, law[0], pre, yld)
         elif what == ROOT_APPROACH:
             f = (dense_v(k, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                  - dense_v(k + 1, hx0, hv0, ha0, hx1, hv1, ha1, h, theta))

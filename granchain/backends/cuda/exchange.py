@@ -12,7 +12,7 @@ from collections import namedtuple
 from numba import cuda, int64
 
 from ..kernels.window import CUT_FORCE
-from .device import FULL_MASK, compression, contact_force, dynamic, law_force, law_power, warp_any, warp_last
+from .device import FULL_MASK, compression, contact_force, dynamic, elastic_force, law_force, law_power, warp_any, warp_last
 
 #: The device functions of a layout, by name.
 Exchange = namedtuple("Exchange", ["sync", "group_max", "group_any", "group_last", "group_sum", "right_neighbour",
@@ -93,13 +93,14 @@ def make_exchange(L: int, G: int, shuffle: bool, votes: bool, damped: bool = Fal
         return shared[j] if j < M else 0.0
 
     @cuda.jit(device=True)
-    def forces(xs, us, own, M, lo, bx, c_left, c_right, inv_m, law, acc, pre):
+    def forces(xs, us, own, M, lo, bx, c_left, c_right, inv_m, law, acc, pre, yld):
         """acc[s] = the acceleration of owned granule s at the positions ``xs``: every thread of the group
         calls it (the positions cross thread boundaries through ``bx``, or by shuffles). Granules behind the
         trailing window (i < lo) are not integrated (acceleration 0: they continue ballistically) and the
         contact at its edge is dropped (``kernels.window``). ``law``: the contacts' (n, gamma, viscous, clamp);
         ``pre``: the static state of a precompressed chain (``device.compression``; None: unloaded), whose contacts
-        exert their dynamic force, 0 in the static state (``kernels.forces.accelerations``).
+        exert their dynamic force, 0 in the static state (``kernels.forces.accelerations``); ``yld``: yielding
+        contacts' yield overlaps and histories (``device.elastic_force``: Thornton's force), or None.
 
         ``damped`` (a constant of the code): the forces of a damped law (``device.law_force``) read the stage
         velocities ``us`` too (through ``bx[MMAX:]``, or by shuffles), and the function returns this thread's
@@ -151,16 +152,17 @@ def make_exchange(L: int, G: int, shuffle: bool, votes: bool, damped: bool = Fal
                         right = dynamic(right, i, pre)
                 elif SHUFFLE:
                     if i > lo:
-                        left = dynamic(contact_force(compression((xs[s - 1] if s > 0 else xl) - xs[s], i - 1, pre),
-                                                     c_left[s], n), i - 1, pre)
+                        left = dynamic(elastic_force(compression((xs[s - 1] if s > 0 else xl) - xs[s], i - 1, pre), i - 1,
+                                                     c_left[s], n, yld), i - 1, pre)
                     if i < M - 1:
-                        right = dynamic(contact_force(compression(xs[s] - (xs[s + 1] if s < G - 1 else xr), i, pre),
-                                                      c_right[s], n), i, pre)
+                        right = dynamic(elastic_force(compression(xs[s] - (xs[s + 1] if s < G - 1 else xr), i, pre), i,
+                                                      c_right[s], n, yld), i, pre)
                 else:
                     if i > lo:
-                        left = dynamic(contact_force(compression(bx[i - 1] - xs[s], i - 1, pre), c_left[s], n), i - 1, pre)
+                        left = dynamic(elastic_force(compression(bx[i - 1] - xs[s], i - 1, pre), i - 1, c_left[s], n, yld),
+                                       i - 1, pre)
                     if i < M - 1:
-                        right = dynamic(contact_force(compression(xs[s] - bx[i + 1], i, pre), c_right[s], n), i, pre)
+                        right = dynamic(elastic_force(compression(xs[s] - bx[i + 1], i, pre), i, c_right[s], n, yld), i, pre)
                 acc[s] = (left - right) * inv_m[s] if i >= lo else 0.0
         return power
 

@@ -44,7 +44,7 @@ from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
 
 # The step control's constants and the stop and window rules: the CPU kernels' own numbers (one source;
 # the GPU code below is the CPU's written for CUDA).
-from ..kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN
+from ..kernels.rkloop import BETA, HISTORY_RTOL, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN, TURN_SLACK
 from ..kernels.stop import RATTLER_MASS_RATIO
 from .device import (
     FULL_MASK,
@@ -58,13 +58,16 @@ from .device import (
     dense_compression,
     dense_law_force,
     dense_v,
+    elastic_force,
     falls,
     force_rate,
     hermite3,
     hermite_max_estimate,
     law_force,
+    plastic_work,
     root,
     static_state,
+    unloading_curve,
 )
 from .exchange import make_exchange
 from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, make_stages, make_velocity, over_tolerance
@@ -73,13 +76,15 @@ from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, 
 #: Layout of the float settings array ``prm`` the kernel reads.
 #: ``P_GAMMA``, ``P_VISCOUS``, ``P_CLAMP``: a damped law's constant, 1 for the viscous law (else Kuwabara-Kono's), 1
 #: where its force is clamped at 0 (``records.Params``; read by the damped kernels alone). ``P_STATIC``: the
-#: precompression F0 (``records.Params.static_force``; read by the precompressed kernels alone).
+#: precompression F0 (``records.Params.static_force``; read by the precompressed kernels alone). ``P_YIELD``: the
+#: yield overlap of two reference granules (``records.Params.yield_overlap``; read by the yielding kernels alone).
 (P_RTOL, P_ATOL, P_FIRST, P_RELAX_LAG, P_RELAX_FACTOR, P_WINDOW_LAG, P_EXIT_MARGIN, P_PEAK_RTOL, P_MAX_STEPS, P_N,
- P_STOP_AT_EXIT, P_WALL, P_T_NEEDED, P_WINDOWS, P_GAMMA, P_VISCOUS, P_CLAMP, P_STATIC, P_SIZE) = range(19)
+ P_STOP_AT_EXIT, P_WALL, P_T_NEEDED, P_WINDOWS, P_GAMMA, P_VISCOUS, P_CLAMP, P_STATIC, P_YIELD, P_SIZE) = range(20)
 
 
 def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False, votes: bool = True,
-                method: str = "rkn4", fixed: bool = False, damped: bool = False, precompressed: bool = False):
+                method: str = "rkn4", fixed: bool = False, damped: bool = False, precompressed: bool = False,
+                plastic: bool = False):
     """The batch kernel of ``method`` ("rkn4", "dp5" or "verlet") for ``L`` threads per chain and ``G``
     granules per thread (chains of up to ``L * G`` granules). ``L``, ``G``, the method and ``fixed`` are
     constants of its code: Numba prunes the barriers of ``L = 1`` and the other methods' code, and sizes
@@ -122,6 +127,21 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     first peak candidate at t = 0 (``kernels.peaks.initial_force_records``). Such a chain has no trailing window
     or relaxed zone (its contacts never open: ``CudaBackend`` runs it with neither) and runs to its time limit.
 
+    ``plastic`` (DP5, not damped): Thornton's elastic-perfectly plastic contacts (C. Thornton, J. Appl. Mech. 64,
+    383 (1997); ``granchain.model.contacts.ElasticPlastic``), contacts with memory, as the CPU's DP5 integrates them
+    (``kernels.rkloop``): each contact's yield overlap delta_y,j and history, its largest overlap so far, are kept
+    in a shared array (``device.elastic_force`` reads them: the loading line beyond the history, the unloading
+    curve from it below); the history moves after each accepted step, never within one, so an accepted step in
+    which a contact on its loading line turns back (its compression peaks beyond its history) is retaken to end
+    at the turn (``kernels.rkloop.yield_turn``: the turn located on the dense output, where the stages past it
+    followed the loading line while the contact unloads). The last argument ``history`` holds each chain's yield
+    overlaps on entry (0: c_j^2 ``P_YIELD``, spheres of one material) and its final histories on return; the
+    dissipated energy written is the plastic work of the final histories (``kernels.forces.plastic_work``). The
+    pulse leaves through a yielded last contact when it opens at its plastic overlap (the dent it keeps:
+    ``kernels.stop.pulse_has_left``). Such a chain runs without a trailing window or relaxed zone (the granules
+    left behind would take their contacts' histories with them: ``effective_integrator``). Other kernels take
+    ``history`` as an empty tuple, which adds no parameter to their code.
+
     Barriers: a group exchanges the stage positions through two alternating shared arrays, so that one
     barrier per force evaluation suffices (a thread can only overwrite an array after every thread has
     passed the next barrier, i.e. finished reading it); per step, one for each force evaluation (RKN4
@@ -152,12 +172,15 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
 
     DAMPED = bool(damped)
     LOADED = bool(precompressed)
+    PLASTIC = bool(plastic)
+    if PLASTIC and (method != "dp5" or DAMPED):
+        raise ValueError("yielding contacts are integrated by DP5 alone, without damping (as the CPU's kernels)")
     LOADED_DAMPED = LOADED and DAMPED  # (one constant: a test of DAMPED nested in LOADED's changed the others' PTX)
     (sync, group_max, group_any, group_last, group_sum, right_neighbour, forces,
      cut_candidates) = make_exchange(L, G, SHUFFLE, VOTES, DAMPED)
     stages = make_stages(method, forces, G, DAMPED)  # (refuses a method it has no stages for, and damping but DP5)
     BX = MMAX * (2 if DAMPED else 1)  # the stage exchange: positions, and a damped law's velocities after them
-    LD = L if DAMPED else 1  # the damped kernels' reductions of the dissipated energy
+    LD = L if DAMPED or PLASTIC else 1  # the reductions of the dissipated energy (damped, yielding)
     PW = 7 if DAMPED else 1
     new_velocity = make_velocity(method)
     step_error = make_error(method, fixed)
@@ -166,7 +189,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     @cuda.jit(**options)
     def kernel(masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, pulse_end, prm,
                peak_v, peak_t, peak_f, peak_ft, peak_d, grid_v, grid_f, status_out, steps_out, rejected_out,
-               t_end_out, exit_out, lo_out, frozen_out, diss_out, x_out, v_out):
+               t_end_out, exit_out, lo_out, frozen_out, diss_out, x_out, v_out, history):
         if GROUP:
             r = cuda.blockIdx.x
             lane = cuda.threadIdx.x
@@ -203,6 +226,10 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 pre = cuda.shared.array((2, MMAX), float64)
             else:
                 pre = None
+            if PLASTIC:  # each contact's yield overlap and history (its largest overlap)
+                yld = cuda.shared.array((2, MMAX), float64)
+            else:
+                yld = None
         else:
             bxa = cuda.local.array(BX, float64)
             bxb = cuda.local.array(BX, float64)
@@ -225,6 +252,10 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 pre = cuda.local.array((2, MMAX), float64)
             else:
                 pre = None
+            if PLASTIC:
+                yld = cuda.local.array((2, MMAX), float64)
+            else:
+                yld = None
         x = cuda.local.array(G, float64)
         v = cuda.local.array(G, float64)
         a0 = cuda.local.array(G, float64)
@@ -287,7 +318,11 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         peak_f[r, i] = pre[1, i]
                     if LOADED_DAMPED:  # (the struck granule's contact closes at v0: ``peaks.initial_force_records``)
                         peak_f[r, i] = law_force(pre[0, i], v[s], c_right[s], law)
-        if LOADED:
+                    if PLASTIC:  # virgin contacts: the history starts at the yield overlap (``rkloop.padded_arrays``)
+                        dy = history[r, i]
+                        yld[0, i] = dy if dy > 0.0 else c_right[s] * c_right[s] * prm[P_YIELD]
+                        yld[1, i] = yld[0, i]
+        if LOADED or PLASTIC:
             sync()
         # The initial state: the first peak candidates, and the grid times <= 0.
         for s in range(G):
@@ -308,7 +343,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                     grid_f[r, g] = 0.0
             g += 1
         lo = int64(0)  # the trailing window: granules 0..lo-1 have left the integration
-        p0 = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0, pre)
+        p0 = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0, pre, yld)
         if DAMPED:
             pw[0] = p0
 
@@ -338,7 +373,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 h = t_stop - t
                 last = True
             h2 = h * h
-            stages(x, v, a0, xs, vs, a3, k1, k2, stage, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre)
+            stages(x, v, a0, xs, vs, a3, k1, k2, stage, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre,
+                   yld)
             # The new velocities (RKN4) and this thread's share of the error norm.
             e = 0.0
             for s in range(G):
@@ -457,6 +493,24 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         hv1[i] = vs[s]
                         ha1[i] = a3[s]
                 sync()
+                if PLASTIC:  # retaken to end where a contact turns from loading to unloading (``rkloop.yield_turn``)
+                    turn = 1.0
+                    for s in range(G):
+                        i = own + s
+                        if i >= lo and i < M - 1:
+                            w0 = hv0[i] - hv0[i + 1]
+                            w1 = hv1[i] - hv1[i + 1]
+                            if falls(w0, w1):
+                                theta = root(ROOT_APPROACH, i, M, w0, w1, hx0, hv0, ha0, hx1, hv1, ha1, h, 0.0, 0.0, 0.0,
+                                             0.0, 0.0, law, pre, yld)
+                                top = dense_compression(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre)
+                                if top > yld[1, i] + HISTORY_RTOL * yld[0, i] and theta < turn:
+                                    turn = theta
+                    turn = -group_max(-turn, red_e, lane)
+                    if turn < 1.0 - TURN_SLACK:
+                        n_rej += 1
+                        h *= turn
+                        continue
                 found = int64(-1)
                 for s in range(G):
                     i = own + s
@@ -468,7 +522,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         else:  # the root of its (damped) acceleration
                             theta = root(ROOT_DAMPED_ACCELERATION if DAMPED else ROOT_ACCELERATION, i, M, a0[s], a3[s],
                                          hx0, hv0, ha0, hx1, hv1, ha1, h, c_left[s] if i > lo else 0.0, c_right[s], 0.0,
-                                         inv_m[s], 0.0, law, pre)
+                                         inv_m[s], 0.0, law, pre, yld)
                             vpk = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                         if vpk > peak_v[r, q] + peak_rtol * abs(peak_v[r, q]):
                             peak_v[r, q] = vpk
@@ -484,7 +538,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                 theta = root(ROOT_FORCE_RATE, i, M, r0, r1, hx0, hv0, ha0, hx1, hv1, ha1, h,
                                              c_left[s] if i > lo else 0.0, c_right[s],
                                              stiffness[r, i + 1] if i < M - 2 else 0.0, inv_m[s], 1.0 / masses[r, i + 1],
-                                             law, pre)
+                                             law, pre, yld)
                                 fp = dense_law_force(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law, pre)
                                 if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                                     peak_f[r, i] = fp
@@ -502,9 +556,9 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                             d1 = compression(hx1[i] - hx1[i + 1], i, pre)
                             if hermite_max_estimate(d0, w0, d1, w1, h) >= SCREEN * peak_d[r, i]:
                                 theta = root(ROOT_APPROACH, i, M, w0, w1, hx0, hv0, ha0, hx1, hv1, ha1, h, 0.0, 0.0, 0.0,
-                                             0.0, 0.0, law, pre)
+                                             0.0, 0.0, law, pre, yld)
                                 dp = dense_compression(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre)
-                                fp = contact_force(dp, c_right[s], n)
+                                fp = elastic_force(dp, i, c_right[s], n, yld)  # (yielding: the history at the step's start)
                                 if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                                     peak_f[r, i] = fp
                                     peak_ft[r, i] = t + theta * h
@@ -532,8 +586,9 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                                     hermite3(hx0[M - 2], hv0[M - 2], hx1[M - 2], hv1[M - 2], h, theta)
                                     - hermite3(hx0[M - 1], hv0[M - 1], hx1[M - 1], hv1[M - 1], h, theta), M - 2, pre), c_right[s], n)
                             else:
-                                grid_f[r, g] = contact_force(
-                                    dense_compression(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre), c_right[s], n)
+                                grid_f[r, g] = elastic_force(
+                                    dense_compression(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre), M - 2, c_right[s],
+                                    n, yld)
                     g += 1
                 before = front
                 front = max(front, group_last(found, red_q, lane))
@@ -575,16 +630,27 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 spent += step_spent
                 pw[0] = pw[6]
                 if cut:  # the first stage without the contact at the window's new edge (as the CPU's)
-                    pw[0] = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0, pre)
+                    pw[0] = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0, pre, yld)
+            if PLASTIC:  # the loading line moves each contact's history, between two barriers: every thread has
+                sync()  # read this step's histories before it moves, and reads the moved ones after
+                for s in range(G):
+                    i = own + s
+                    if i < M - 1:
+                        yld[1, i] = max(yld[1, i], compression(x[s] - (x[s + 1] if s < G - 1 else xr1), i, pre))
+                sync()
             t = t_new
             n_acc += 1
 
             # The stop rule (``kernels.stop.end_of_step``), from the tail granules every thread read.
             if stop_at_exit:
                 out_now = False
+                gap = 0.0  # the compression at which the last contact opens (``kernels.stop.pulse_has_left``)
+                if PLASTIC:
+                    if yld[1, M - 2] > yld[0, M - 2]:  # a yielded last contact opens at its plastic overlap (its dent)
+                        gap = unloading_curve(yld[1, M - 2], yld[0, M - 2])[1] - compression(0.0, M - 2, pre)
                 if wall:
-                    out_now = x_m2 - x_m1 <= 0.0 and v_m2 < 0.0
-                elif x_m2 - x_m1 <= 0.0 and v_m1 > 0.0 and v_m2 < v_m1:
+                    out_now = x_m2 - x_m1 <= gap and v_m2 < 0.0
+                elif x_m2 - x_m1 <= gap and v_m1 > 0.0 and v_m2 < v_m1:
                     # ``pulse_has_left``: no granule at least RATTLER_MASS_RATIO as heavy as the last outruns it.
                     blocked = 0
                     m_min = RATTLER_MASS_RATIO * m_last
@@ -630,13 +696,18 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 d = compression(x[s] - hx0[i + 1], i, pre)
                 if d > 0.0 and v[s] - hv0[i + 1] > 0.0:
                     # (a damped force clamped at 0 never beats the recorded peak, which is >= 0)
-                    f = law_force(d, v[s] - hv0[i + 1], c_right[s], law) if DAMPED else contact_force(d, c_right[s], n)
+                    f = law_force(d, v[s] - hv0[i + 1], c_right[s], law) if DAMPED else elastic_force(d, i, c_right[s], n, yld)
                     if f > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
                         peak_f[r, i] = f
                         peak_ft[r, i] = t
             if i < M:
                 x_out[r, i] = x[s]
                 v_out[r, i] = v[s]
+            if PLASTIC and i < M - 1:  # the plastic work, a function of the history; the final history returned
+                spent += plastic_work(yld[1, i], c_right[s], yld[0, i])
+                history[r, i] = yld[1, i]
+        if PLASTIC:
+            spent = group_sum(spent, red_w, lane)
         if lane == 0:
             status_out[r] = status
             steps_out[r] = n_acc

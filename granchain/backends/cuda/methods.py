@@ -42,14 +42,15 @@ DE1, DE3, DE4, DE5, DE6, DE7 = _dp5.E1, _dp5.E3, _dp5.E4, _dp5.E5, _dp5.E6, _dp5
 
 def make_stages(method: str, forces, G: int, damped: bool = False):
     """The device function ``stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left,
-    c_right, inv_m, law, pw, pre)`` of ``method``: one step of size ``h`` (``h2`` = h^2) from the thread's granules'
+    c_right, inv_m, law, pw, pre, yld)`` of ``method``: one step of size ``h`` (``h2`` = h^2) from the thread's granules'
     state ``x``, ``v`` and acceleration ``a0`` to the new state ``xs``, ``vs`` (RKN4's velocities after the
     stages: :func:`make_velocity`) and its acceleration ``a3`` (the next step's first stage), the
     intermediate stages in ``k1``, ``k2`` and, for DP5, the rows of
     ``S`` (:data:`DP5_ROWS`). ``forces`` is the layout's force evaluation (``exchange.make_exchange``),
     which every thread of the group calls at the same stages; its two shared arrays ``bxa``, ``bxb``
     alternate, so that one barrier per evaluation suffices. ``law``: the contacts' (n, gamma, viscous, clamp)
-    (``device.law_force``); ``pre``: a precompressed chain's static state (``device.compression``), or None.
+    (``device.law_force``); ``pre``: a precompressed chain's static state (``device.compression``), or None;
+    ``yld``: yielding contacts' yield overlaps and histories (``device.elastic_force``), or None.
 
     ``damped`` (DP5 only; ``forces`` made for it): the forces read the stage velocities, as the CPU's DP5's
     do, and each stage's share of the power the thread's contacts dissipate goes to ``pw[1..6]`` (``pw[0]``,
@@ -63,72 +64,72 @@ def make_stages(method: str, forces, G: int, damped: bool = False):
     if method == "verlet":
 
         @cuda.jit(device=True)
-        def stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre):
+        def stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre, yld):
             """``kernels.verlet``: x' = x + h v + h^2 a / 2, v' = v + h (a + a') / 2."""
             for s in range(G):
                 xs[s] = x[s] + (h * v[s] + 0.5 * h * h * a0[s])
-            forces(xs, v, own, M, lo, bxb, c_left, c_right, inv_m, law, a3, pre)
+            forces(xs, v, own, M, lo, bxb, c_left, c_right, inv_m, law, a3, pre, yld)
             for s in range(G):
                 vs[s] = v[s] + 0.5 * h * (a0[s] + a3[s])
 
     elif method == "dp5":
 
         @cuda.jit(device=True)
-        def stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre):
+        def stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre, yld):
             """Stages 2..7 of ``kernels.dp5.stages``: the 7th is the new state (FSAL)."""
             u1, u2, u3, u4, u5, k3, k4, k5 = S[0], S[1], S[2], S[3], S[4], S[5], S[6], S[7]
             for s in range(G):
                 xs[s] = x[s] + h * (D21 * v[s])
                 u1[s] = v[s] + h * (D21 * a0[s])
-            p = forces(xs, u1, own, M, lo, bxb, c_left, c_right, inv_m, law, k1, pre)
+            p = forces(xs, u1, own, M, lo, bxb, c_left, c_right, inv_m, law, k1, pre, yld)
             if DAMPED:
                 pw[1] = p
             for s in range(G):
                 xs[s] = x[s] + h * (D31 * v[s] + D32 * u1[s])
                 u2[s] = v[s] + h * (D31 * a0[s] + D32 * k1[s])
-            p = forces(xs, u2, own, M, lo, bxa, c_left, c_right, inv_m, law, k2, pre)
+            p = forces(xs, u2, own, M, lo, bxa, c_left, c_right, inv_m, law, k2, pre, yld)
             if DAMPED:
                 pw[2] = p
             for s in range(G):
                 xs[s] = x[s] + h * (D41 * v[s] + D42 * u1[s] + D43 * u2[s])
                 u3[s] = v[s] + h * (D41 * a0[s] + D42 * k1[s] + D43 * k2[s])
-            p = forces(xs, u3, own, M, lo, bxb, c_left, c_right, inv_m, law, k3, pre)
+            p = forces(xs, u3, own, M, lo, bxb, c_left, c_right, inv_m, law, k3, pre, yld)
             if DAMPED:
                 pw[3] = p
             for s in range(G):
                 xs[s] = x[s] + h * (D51 * v[s] + D52 * u1[s] + D53 * u2[s] + D54 * u3[s])
                 u4[s] = v[s] + h * (D51 * a0[s] + D52 * k1[s] + D53 * k2[s] + D54 * k3[s])
-            p = forces(xs, u4, own, M, lo, bxa, c_left, c_right, inv_m, law, k4, pre)
+            p = forces(xs, u4, own, M, lo, bxa, c_left, c_right, inv_m, law, k4, pre, yld)
             if DAMPED:
                 pw[4] = p
             for s in range(G):
                 xs[s] = x[s] + h * (D61 * v[s] + D62 * u1[s] + D63 * u2[s] + D64 * u3[s] + D65 * u4[s])
                 u5[s] = v[s] + h * (D61 * a0[s] + D62 * k1[s] + D63 * k2[s] + D64 * k3[s] + D65 * k4[s])
-            p = forces(xs, u5, own, M, lo, bxb, c_left, c_right, inv_m, law, k5, pre)
+            p = forces(xs, u5, own, M, lo, bxb, c_left, c_right, inv_m, law, k5, pre, yld)
             if DAMPED:
                 pw[5] = p
             for s in range(G):
                 xs[s] = x[s] + h * (DB1 * v[s] + DB3 * u2[s] + DB4 * u3[s] + DB5 * u4[s] + DB6 * u5[s])
                 vs[s] = v[s] + h * (DB1 * a0[s] + DB3 * k2[s] + DB4 * k3[s] + DB5 * k4[s] + DB6 * k5[s])
-            p = forces(xs, vs, own, M, lo, bxa, c_left, c_right, inv_m, law, a3, pre)
+            p = forces(xs, vs, own, M, lo, bxa, c_left, c_right, inv_m, law, a3, pre, yld)
             if DAMPED:
                 pw[6] = p
 
     else:
 
         @cuda.jit(device=True)
-        def stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre):
+        def stages(x, v, a0, xs, vs, a3, k1, k2, S, h, h2, own, M, lo, bxa, bxb, c_left, c_right, inv_m, law, pw, pre, yld):
             """Stages 1..3 of ``kernels.rkn4.stages`` (a3 the force per mass at the new position); the new
             velocities come after (:func:`make_velocity`)."""
             for s in range(G):
                 xs[s] = x[s] + h * (C1 * v[s]) + h2 * (A10 * a0[s])
-            forces(xs, v, own, M, lo, bxb, c_left, c_right, inv_m, law, k1, pre)
+            forces(xs, v, own, M, lo, bxb, c_left, c_right, inv_m, law, k1, pre, yld)
             for s in range(G):
                 xs[s] = x[s] + h * (C2 * v[s]) + h2 * (A20 * a0[s] + A21 * k1[s])
-            forces(xs, v, own, M, lo, bxa, c_left, c_right, inv_m, law, k2, pre)
+            forces(xs, v, own, M, lo, bxa, c_left, c_right, inv_m, law, k2, pre, yld)
             for s in range(G):
                 xs[s] = x[s] + h * v[s] + h2 * (B0 * a0[s] + B1 * k1[s] + B2 * k2[s])
-            forces(xs, v, own, M, lo, bxb, c_left, c_right, inv_m, law, a3, pre)
+            forces(xs, v, own, M, lo, bxb, c_left, c_right, inv_m, law, a3, pre, yld)
 
     return stages
 
