@@ -197,6 +197,23 @@ def test_precompressed_ensemble_on_the_gpu_is_the_cpus(tmp_path):
     assert np.max(np.abs(gpu["energy_error"])) < 1e-7 and np.max(np.abs(cpu["energy_error"])) < 1e-7
 
 
+def test_the_aligned_pulse_is_summed_on_the_gpu():
+    """The aligned pulse <v_k(t_k^peak + tau)> (``kernels.aligned``) summed on the GPU from the grid velocities and
+    peak times it holds, one thread per lag and granule: the CPU's fixed-point sums to a rounding of one term per
+    realisation (the simulator gives the CPU's velocities to rounding), and a second run bitwise the first.
+    Negative control: the sums at the lags shifted by one grid step differ (the comparison sees the lags)."""
+    lags = np.arange(-2.0, 2.01, 0.25)
+    res = sim("compare", 1, "shared", 4, 2, 16.0, False, True, True, "decorated", "decorated", None, 0.0, lags.tolist())
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert_same_run(gpu, cpu)
+    assert res["again"] == gpu
+    for key in ("sum_a", "sum_a2"):
+        assert np.max(np.abs(np.subtract(gpu[key], cpu[key]))) <= 2, key
+    assert np.min(np.max(cpu["sum_a"], axis=0)) > 0.1 * 2.0**30  # every granule's pulse seen about its peak
+    shifted = np.asarray(cpu["sum_a"])[1:]
+    assert np.max(np.abs(np.asarray(gpu["sum_a"])[:-1] - shifted)) > 1e-3 * 2.0**30
+
+
 def test_precompressed_granules_ahead_stay_exactly_at_rest():
     """A precompressed chain on the GPU is integrated in displacements from its static state, each contact pushing
     with its force less its static force computed by the same arithmetic: ahead of the pulse that is exactly 0, so

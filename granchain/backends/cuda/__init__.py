@@ -13,7 +13,8 @@ and its sums of the averaged pulse are fixed-point integers added in a fixed ord
 gives the same bits. Precompressed chains run as the CPU runs them (in displacements from the static state,
 to their time limit), and so do contacts that yield (Thornton's elastic-plastic law, with DP5: each contact's
 history kept on the GPU, a step retaken where a contact turns from loading to unloading). What it has no kernel
-for (the aligned pulse, force sensors on the grid) is refused with an error that names the CPU backend.
+for (force sensors on the grid) is refused with an error that names the CPU backend. The aligned pulse (each
+realisation's velocities about its own peak times) is summed on the GPU too, from the grid velocities there.
 
 Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, which installs
 ``numba-cuda``). Under ``NUMBA_ENABLE_CUDASIM=1`` the same kernels run in Numba's simulator on a CPU
@@ -177,17 +178,14 @@ class CudaBackend(Backend):
                         controls, scale: float, out: dict, model=None, pulse_end=None) -> None:
         from .. import aligned_outputs, batch_chain
 
-        if out.get("lags") is not None:
-            raise ValueError("the cuda backend does not accumulate the aligned pulse (lags); use the CPU backend "
-                             "(backend='cpu')")
-        aligned_outputs(out, observed.shape[0])
+        lags = aligned_outputs(out, observed.shape[0])[0]
         integrator.check_chains(masses, stiffness, n, initial_velocity)
         first = batch_chain(masses[0], stiffness[0], n, initial_velocity[0], observed, model)
         self.check(integrator, first)
         R = masses.shape[0]
         limits = np.ascontiguousarray(np.broadcast_to(np.asarray(t_max, dtype=float), (R,)))
         res = self._run(integrator, first, masses, stiffness, initial_velocity, observed, t_grid, limits,
-                        first.ends_at_exit, controls, pulse_end, scale=scale, sums=out)
+                        first.ends_at_exit, controls, pulse_end, scale=scale, sums=out, lags=lags)
         wall = first.boundary.wall
         out["peak_velocity"][:], out["peak_time"][:] = res["peak_velocity"], res["peak_time"]
         contacts = np.asarray(contacts, dtype=np.int64)
@@ -203,9 +201,10 @@ class CudaBackend(Backend):
         out["n_valid"][0] += int(np.count_nonzero(res["status"] == 0))
 
     def _run(self, integrator, chain, masses, stiffness, v0, observed, t_grid, t_max, stop_at_exit, controls,
-             pulse_end, *, scale=None, sums=None, history=None) -> dict:
+             pulse_end, *, scale=None, sums=None, history=None, lags=None) -> dict:
         """Integrate the rows on the GPU in launches of at most :data:`GRID_BYTES` of grid velocities. Returns
-        the per-row arrays (and, with ``sums``, adds the averaged pulse's fixed-point sums into it). Yielding
+        the per-row arrays (and, with ``sums``, adds the averaged pulse's fixed-point sums into it, and with ``lags``
+        the aligned pulse's, ``sum_a`` and ``sum_a2``: ``kernels.aligned``). Yielding
         contacts: ``history`` (rows x contacts) their yield overlaps (None: c^2 times the law's reference yield
         overlap, spheres of one material, as the CPU's ensembles), and each row's final histories returned."""
         from numba import cuda
@@ -252,6 +251,8 @@ class CudaBackend(Backend):
             history = np.zeros((R, M - 1)) if history is None else np.asarray(history, dtype=float)[order]
         per = max(1, min(R, int(GRID_BYTES // max(1, T * K * 8))))
         const = [cuda.to_device(np.ascontiguousarray(a)) for a in (obs_of, observed, np.asarray(t_grid, float), ends, prm)]
+        aligned = sums is not None and lags is not None and lags.size > 0 and T > 0 and K > 0
+        d_lags = cuda.to_device(np.ascontiguousarray(lags, dtype=float)) if aligned else None
         # (each named as the results name it: ``RunRecord``, the ensembles' schema; the compressions stay on the device)
         res = {k: [] for k in KERNEL_OUTPUTS + ("history",) if k != "peak_compression"}
         elapsed = 0.0
@@ -282,6 +283,11 @@ class CudaBackend(Backend):
                 if wall:
                     d_sf = cuda.to_device(np.zeros(T, dtype=np.int64))
                     make_wall_sum_kernel_cached()[-(-T // 128), 128](d_out["wall_force"], d_out["status"], float(scale), d_sf)
+                if aligned:
+                    d_sa = cuda.to_device(np.zeros((lags.size, K), dtype=np.int64))
+                    d_sa2 = cuda.to_device(np.zeros((lags.size, K), dtype=np.int64))
+                    make_aligned_sum_kernel_cached()[-(-(lags.size * K) // 128), 128](
+                        d_out["velocity"], d_out["peak_time"], d_out["status"], const[2], d_lags, float(scale), d_sa, d_sa2)
             cuda.synchronize()
             elapsed += time.perf_counter() - t0
             launches += 1
@@ -290,6 +296,9 @@ class CudaBackend(Backend):
                 sums["sum_v2"] += d_sv2.copy_to_host()
                 if wall:
                     sums["sum_wall"] += d_sf.copy_to_host()
+                if aligned:
+                    sums["sum_a"] += d_sa.copy_to_host()
+                    sums["sum_a2"] += d_sa2.copy_to_host()
             for k in res:
                 if k == "velocity" and sums is not None:
                     continue  # reduced on the device
@@ -324,6 +333,14 @@ def make_sum_kernel_cached():
     if "v" not in _SUMS:
         _SUMS["v"] = make_sum_kernel()
     return _SUMS["v"]
+
+
+def make_aligned_sum_kernel_cached():
+    from .sums import make_aligned_sum_kernel
+
+    if "a" not in _SUMS:
+        _SUMS["a"] = make_aligned_sum_kernel()
+    return _SUMS["a"]
 
 
 def make_wall_sum_kernel_cached():
