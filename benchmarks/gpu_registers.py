@@ -123,20 +123,21 @@ def _compile_for(cc):
     dispatcher.get_current_device = lambda: _Device()
 
 
-def signature(plastic: bool = False):
+def signature(plastic: bool = False, sensed: bool = False):
     """The kernel's argument types as ``CudaBackend._run`` passes them (C-contiguous device arrays; the yielding
-    contacts' histories, or an empty tuple for the other kernels)."""
+    contacts' histories and the sensed contacts and their forces, or empty tuples for the kernels without them)."""
     from numba import float64, int64, typeof
 
     f1, f2, f3, i1 = float64[::1], float64[:, ::1], float64[:, :, ::1], int64[::1]
     return (f2, f2, f1, f1, i1, i1, f1, f1, f1,  # masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, ends, prm
             f2, f2, f2, f2, f2, f3, f2,  # peak_v, peak_t, peak_f, peak_ft, peak_d, grid_v, grid_f
             i1, i1, i1, f1, f1, i1, f1, f1, f2, f2,  # status, steps, rejected, t_end, exit, lo, frozen, dissipated, x, v
-            f2 if plastic else typeof(()))  # history
+            f2 if plastic else typeof(()),  # history
+            i1 if sensed else typeof(()), f3 if sensed else typeof(()))  # sensors, grid_c
 
 
 def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxas: str, fixed: bool = False,
-           damped: bool = False, precompressed: bool = False, plastic: bool = False) -> dict:
+           damped: bool = False, precompressed: bool = False, plastic: bool = False, sensed: bool = False) -> dict:
     """Compile one kernel to PTX (NVVM) and assemble it (ptxas -v): its resources and digest."""
     from numba import cuda
 
@@ -144,8 +145,8 @@ def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxa
     from granchain.backends.cuda.kernel import make_kernel
 
     kernel = make_kernel(L, G, cap, exchange == "shuffle", exchange == "shuffle", method, fixed, damped, precompressed,
-                         plastic)
-    ptx, _ = cuda.compile_ptx(kernel.py_func, signature(plastic), cc=tuple(cc))
+                         plastic, sensed)
+    ptx, _ = cuda.compile_ptx(kernel.py_func, signature(plastic, sensed), cc=tuple(cc))
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "kernel.ptx")
         with open(path, "w") as f:
@@ -165,7 +166,7 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default="rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic",
                     help="methods, comma-separated; a suffix -damped: for contacts that dissipate (DP5 only), "
                          "-plastic: for contacts that yield (DP5 only, instead of -damped), -precompressed: for "
-                         "precompressed chains, after the others (default "
+                         "precompressed chains, -sensed: with force sensors on the grid, after the others (default "
                          "rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic)")
     ap.add_argument("--caps", default="168,128,96", help="register caps tried on the default layout (default 168,128,96)")
     args = ap.parse_args(argv)
@@ -194,9 +195,9 @@ def main(argv=None) -> int:
     for method, L, exchange, G, cap in cases:
         if method not in methods:
             continue
-        name, damped, precompressed = method.partition("-")[0], "-damped" in method, method.endswith("-precompressed")
+        name, damped, precompressed = method.partition("-")[0], "-damped" in method, "-precompressed" in method
         r = report(name, L, exchange, G, cap, cc, ptxas, damped=damped, precompressed=precompressed,
-                   plastic="-plastic" in method)
+                   plastic="-plastic" in method, sensed="-sensed" in method)
         base = r if base is None else base
         print(f"[registers sm_{cc[0]}{cc[1]}] {method} L={L} {exchange} G={G} cap {cap or 'none'}: "
               f"{r['registers']} registers, spills {r['spill_stores']} B stored / {r['spill_loads']} B loaded, "

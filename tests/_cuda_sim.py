@@ -110,19 +110,25 @@ def compare(threads: int, exchange: str, n_large: int, realizations: int, t_end:
     return {"cuda": first, "again": again, "cpu": cpu}
 
 
+def small_chain(radii, contact: str | None, load: float, wall: bool):
+    """``gc.decorated(radii)`` with the law ``contact`` (:func:`contact_of`), a precompression ``load`` and a wall."""
+    import granchain as gc
+
+    chain = gc.decorated(radii)
+    if contact is not None:
+        chain = chain.replace(contact=contact_of(contact))
+    if load:
+        chain = chain.with_precompression(load)
+    return chain.with_wall() if wall else chain
+
+
 def versus_dop853(threads: int, wall: bool, method: str = "rkn4", contact: str | None = None, load: float = 0.0) -> dict:
     """``simulate(..., backend="cuda")`` with ``method`` ("rkn4" or "dp5" at rtol 1e-10, "verlet" at dt = 2.5e-4)
     and DOP853 on a small decorated chain (with a wall or a free end; ``contact``: its law, :func:`contact_of`;
     ``load``: a precompression F0). Also each contact's static force (``"static_force"``: F0 to rounding)."""
     import granchain as gc
 
-    chain = gc.decorated([0.3, 0.05, 0.2])
-    if contact is not None:
-        chain = chain.replace(contact=contact_of(contact))
-    if load:
-        chain = chain.with_precompression(load)
-    if wall:
-        chain = chain.with_wall()
+    chain = small_chain([0.3, 0.05, 0.2], contact, load, wall)
     grid = np.linspace(0.0, 12.0, 25)
     from granchain.backends.cuda import CudaBackend
 
@@ -185,8 +191,6 @@ def refusals() -> dict:
         "yielding contacts with RKN4": lambda: gc.simulate(chain.replace(contact=gc.ElasticPlastic(0.5)), "rkn4",
                                                           backend=backend),
         "damping with RKN4": lambda: gc.simulate(chain.with_dissipation(0.1), "rkn4", backend=backend),
-        "sensors": lambda: gc.simulate(gc.decorated([0.3, 0.05, 0.3]), "rkn4", backend=backend, sensors=[2],
-                                       t_grid=np.linspace(0, 5, 6)),
     }
     got = {}
     for name, call in cases.items():
@@ -232,6 +236,30 @@ def striker(threads: int) -> dict:
     return res
 
 
+def sensors(threads: int, integrator: str, contact: str | None = None, wall: bool = False, load: float = 0.0,
+            repeats: int = 1, t_end: float = 14.0) -> dict:
+    """Force sensors (granules 2 and 5, and with a wall the last) of a decorated chain of 6 ``repeats`` large granules
+    (on a grid to ``t_end``) on the
+    GPU backend and on the CPU's: each one's status, steps, sensor forces and wall force on the grid. ``integrator``:
+    :func:`integrator_of` (e.g. "decorated" for the ensembles' RKN4, "verlet:0.01"); ``contact``: :func:`contact_of`;
+    ``load``: a precompression (to t = 15)."""
+    import granchain as gc
+    from granchain.backends.cuda import CudaBackend
+
+    chain = small_chain([0.3, 0.05, 0.2, 0.37, 0.11, 0.25] * repeats, contact, load, wall)
+    labels = [2, 5] + ([chain.size - 1] if wall else [])  # (the wall is the last "granule" of the chain)
+    integ = integrator_of(integrator)
+    end = {"t_max": 15.0, "stop": "t_max"} if load else {}
+    res = {}
+    for name, kw in (("cuda", {"backend": CudaBackend(threads)}), ("cpu", {})):
+        r = gc.simulate(chain, integ, t_grid=np.linspace(0.0, t_end, int(4 * t_end) + 1), sensors=labels, **end, **kw)
+        res[name] = {"status": int(r.status), "n_steps": int(r.n_steps),
+                     "sensor_force": r.sensor_force.tolist(),  # (NaN behind a trailing window: JSON's NaN)
+                     "wall_force": None if r.wall_force is None else np.asarray(r.wall_force).tolist(),
+                     "peak_velocity": r.peak_velocity.tolist()}
+    return res
+
+
 def unavailable() -> dict:
     """Without the simulator and without a GPU: the error a user gets."""
     from granchain.backends import BackendUnavailable, get_backend
@@ -273,7 +301,7 @@ def model_ensemble(threads: int, store: str, model: str = "damped") -> dict:
 
 CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "votes": votes, "refusals": refusals,
           "unavailable": unavailable, "model_ensemble": model_ensemble, "rest_ahead": rest_ahead,
-          "striker": striker}
+          "striker": striker, "sensors": sensors}
 
 if __name__ == "__main__":
     name, args = sys.argv[1], [json.loads(a) for a in sys.argv[2:]]

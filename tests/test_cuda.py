@@ -214,6 +214,50 @@ def test_the_aligned_pulse_is_summed_on_the_gpu():
     assert np.max(np.abs(np.asarray(gpu["sum_a"])[:-1] - shifted)) > 1e-3 * 2.0**30
 
 
+@pytest.mark.parametrize("threads, wall, load, repeats, t_end", [
+    pytest.param(1, True, 0.0, 1, 14.0, id="wall"),
+    pytest.param(4, True, 1e-3, 1, 14.0, id="shared memory, loaded", marks=pytest.mark.slow),
+    pytest.param(1, False, 0.0, 3, 30.0, id="trailing window", marks=pytest.mark.slow),
+])
+def test_force_sensors_on_the_gpu_are_the_cpus(threads, wall, load, repeats, t_end):
+    """Force sensors (each sensor granule's two contacts, sampled on the grid by the threads that hold them; with a
+    wall the granule next to it), the ensembles' RKN4 (its trailing window on where the chain licenses it): the
+    CPU's forces to rounding, one thread or a group through shared memory, a static load in them (the grid's first
+    sample is F0); behind the trailing window NaN, as on the CPU, at the same grid times (and there are such
+    times, with samples before them)."""
+    res = sim("sensors", threads, "decorated", None, wall, load, repeats, t_end)
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert gpu["status"] == cpu["status"] == 0 and gpu["n_steps"] == cpu["n_steps"]
+    g, c = np.array(gpu["sensor_force"], dtype=float), np.array(cpu["sensor_force"], dtype=float)
+    np.testing.assert_array_equal(np.isnan(g), np.isnan(c))
+    np.testing.assert_allclose(g, c, rtol=1e-12, atol=1e-14)
+    assert np.nanmax(c) > 0.3  # the pulse went through every sensor
+    if load:
+        np.testing.assert_allclose(c[:, 0], load, rtol=1e-12)
+    if not (wall or load):
+        behind = np.isnan(c[0])
+        assert behind.any() and not behind[: len(behind) // 2].any()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator, contact, rtol", [("verlet:0.005", None, 1e-12), ("damped", "kuwabara-kono:0.05", 1e-8),
+                                                       ("damped", "plastic:0.2", 1e-7)],
+                         ids=["verlet", "dp5 kuwabara-kono", "dp5 yielding"])
+def test_force_sensors_of_every_method_and_law(integrator, contact, rtol):
+    """Force sensors against a wall read on each method's interpolant by each law, one thread per chain: Verlet's
+    cubic Hermite (the CPU's to rounding), DP5's damped force from the dense output's compression and its rate,
+    Thornton's force from each contact's history (within the contract: DP5's quintic Hermite on the GPU against
+    the CPU's continuous extension, and, yielding, steps retaken at turns located on them; measured 4e-10 and
+    7e-10 apart), each within ``rtol`` of the largest force."""
+    res = sim("sensors", 1, integrator, contact, True)
+    gpu, cpu = res["cuda"], res["cpu"]
+    assert gpu["status"] == cpu["status"] == 0
+    scale = np.max(cpu["sensor_force"])  # (within rtol of the largest force: the small ones too)
+    assert scale > 0.2
+    np.testing.assert_allclose(gpu["sensor_force"], cpu["sensor_force"], rtol=0, atol=rtol * scale)
+    np.testing.assert_allclose(gpu["wall_force"], cpu["wall_force"], rtol=0, atol=rtol * scale)
+
+
 def test_precompressed_granules_ahead_stay_exactly_at_rest():
     """A precompressed chain on the GPU is integrated in displacements from its static state, each contact pushing
     with its force less its static force computed by the same arithmetic: ahead of the pulse that is exactly 0, so

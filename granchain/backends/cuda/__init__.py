@@ -12,9 +12,10 @@ multiply-adds round differently, and DP5's peaks are read on another interpolant
 and its sums of the averaged pulse are fixed-point integers added in a fixed order, so a run repeated
 gives the same bits. Precompressed chains run as the CPU runs them (in displacements from the static state,
 to their time limit), and so do contacts that yield (Thornton's elastic-plastic law, with DP5: each contact's
-history kept on the GPU, a step retaken where a contact turns from loading to unloading). What it has no kernel
-for (force sensors on the grid) is refused with an error that names the CPU backend. The aligned pulse (each
-realisation's velocities about its own peak times) is summed on the GPU too, from the grid velocities there.
+history kept on the GPU, a step retaken where a contact turns from loading to unloading). It samples force
+sensors on the grid as the CPU does, and sums the aligned pulse (each realisation's velocities about its own
+peak times) from the grid velocities it holds. What it has no kernel for (another contact law or integrator, a
+chain not at rest ahead of the pulse) is refused with an error that names the CPU backend.
 
 Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, which installs
 ``numba-cuda``). Under ``NUMBA_ENABLE_CUDASIM=1`` the same kernels run in Numba's simulator on a CPU
@@ -124,16 +125,17 @@ class CudaBackend(Backend):
                              f"{chain.initial!r} does not{cpu}")
         super().check(integrator, chain)
 
-    def _kernel(self, M: int, method: str, fixed: bool, damped: bool, precompressed: bool, plastic: bool = False):
+    def _kernel(self, M: int, method: str, fixed: bool, damped: bool, precompressed: bool, plastic: bool = False,
+                sensed: bool = False):
         from .kernel import make_kernel
 
         L = self.threads_per_chain
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
-        key = (L, G, method, fixed, damped, precompressed, plastic)
+        key = (L, G, method, fixed, damped, precompressed, plastic, sensed)
         if key not in self._kernels:
             self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed,
-                                             damped, precompressed, plastic)
+                                             damped, precompressed, plastic, sensed)
         return L, G, self._kernels[key]
 
     # ------------------------------------------------------------------ runs
@@ -153,14 +155,11 @@ class CudaBackend(Backend):
         )
 
         self.check(integrator, chain)
-        if sensed is not None and len(sensed):
-            raise ValueError("the cuda backend records no contact forces on the grid (sensors); use the CPU backend "
-                             "(backend='cpu')")
         if np.any(x != 0.0) or np.count_nonzero(v[1:]):
             raise ValueError("the cuda backend starts from rest with granule 1 struck; use the CPU backend (backend='cpu')")
         res = self._run(integrator, chain, chain.masses[None], chain.stiffness[None], np.array([v[0]]),
                         chain.observed, t_grid, np.array([float(t_max)]), stop_at_exit, controls, None,
-                        history=None if history is None else np.asarray(history, dtype=float)[None])
+                        history=None if history is None else np.asarray(history, dtype=float)[None], sensed=sensed)
         info = np.zeros(INFO_SIZE)
         info[INFO_T_END], info[INFO_STEPS] = res["t_end"][0], res["n_steps"][0]
         info[INFO_REJECTED] = res["n_rejected"][0]
@@ -171,8 +170,9 @@ class CudaBackend(Backend):
         if history is not None and res["history"] is not None:
             history[:] = res["history"][0]
         grid_f = res["wall_force"][0] if res["wall_force"] is not None else np.zeros(t_grid.size)
+        grid_c = res["sensor_force"][0] if res["sensor_force"] is not None else np.zeros((t_grid.size, 0))
         return (int(res["status"][0]), info, res["peak_velocity"][0], res["peak_time"][0], res["velocity"][0],
-                res["peak_force"][0], res["peak_force_time"][0], grid_f, np.zeros((t_grid.size, 0)))
+                res["peak_force"][0], res["peak_force_time"][0], grid_f, grid_c)
 
     def integrate_batch(self, integrator, masses, stiffness, n, initial_velocity, observed, contacts, *, t_grid, t_max,
                         controls, scale: float, out: dict, model=None, pulse_end=None) -> None:
@@ -201,12 +201,14 @@ class CudaBackend(Backend):
         out["n_valid"][0] += int(np.count_nonzero(res["status"] == 0))
 
     def _run(self, integrator, chain, masses, stiffness, v0, observed, t_grid, t_max, stop_at_exit, controls,
-             pulse_end, *, scale=None, sums=None, history=None, lags=None) -> dict:
+             pulse_end, *, scale=None, sums=None, history=None, lags=None, sensed=None) -> dict:
         """Integrate the rows on the GPU in launches of at most :data:`GRID_BYTES` of grid velocities. Returns
         the per-row arrays (and, with ``sums``, adds the averaged pulse's fixed-point sums into it, and with ``lags``
         the aligned pulse's, ``sum_a`` and ``sum_a2``: ``kernels.aligned``). Yielding
         contacts: ``history`` (rows x contacts) their yield overlaps (None: c^2 times the law's reference yield
-        overlap, spheres of one material, as the CPU's ensembles), and each row's final histories returned."""
+        overlap, spheres of one material, as the CPU's ensembles), and each row's final histories returned.
+        ``sensed``: contacts (0-based) whose total forces are sampled on the grid (``"sensor_force"``, rows x grid
+        times x contacts)."""
         from numba import cuda
 
         from ..kernels.forces import DAMPING_VISCOUS
@@ -241,7 +243,8 @@ class CudaBackend(Backend):
         assert not (loaded and steps[5]), "a precompressed chain runs without a trailing window"
         # Yielding contacts likewise (effective_integrator): the granules left behind would take their histories.
         assert not (plastic and (steps[3] or steps[5])), "yielding contacts run without goal-oriented zones"
-        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded, plastic)
+        sensing = sensed is not None and len(sensed) > 0 and T > 0
+        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded, plastic, sensing)
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.
@@ -254,7 +257,8 @@ class CudaBackend(Backend):
         aligned = sums is not None and lags is not None and lags.size > 0 and T > 0 and K > 0
         d_lags = cuda.to_device(np.ascontiguousarray(lags, dtype=float)) if aligned else None
         # (each named as the results name it: ``RunRecord``, the ensembles' schema; the compressions stay on the device)
-        res = {k: [] for k in KERNEL_OUTPUTS + ("history",) if k != "peak_compression"}
+        res = {k: [] for k in KERNEL_OUTPUTS + ("history", "sensor_force") if k != "peak_compression"}
+        d_sensed = cuda.to_device(np.ascontiguousarray(sensed, dtype=np.int64)) if sensing else ()
         elapsed = 0.0
         launches = 0
         for start in range(0, R, per):
@@ -272,10 +276,13 @@ class CudaBackend(Backend):
             d_out["velocities"] = cuda.device_array((r, M), dtype=np.float64)
             # (in: the yield overlaps; out: the final histories. Other kernels: an empty tuple, no parameter)
             d_hist = cuda.to_device(np.ascontiguousarray(history[sl])) if plastic else ()
+            d_grid_c = cuda.device_array((r, T, len(sensed)), dtype=np.float64) if sensing else ()
+            extra = {"history": d_hist if plastic else None, "sensor_force": d_grid_c if sensing else None}
             blocks, threads = (r, L) if L > 1 else (-(-r // BLOCK_THREADS), BLOCK_THREADS)
             cuda.synchronize()
             t0 = time.perf_counter()
-            kernel[blocks, threads](*d_in[:2], d_in[2], d_in[3], *const, *(d_out[k] for k in KERNEL_OUTPUTS), d_hist)
+            kernel[blocks, threads](*d_in[:2], d_in[2], d_in[3], *const, *(d_out[k] for k in KERNEL_OUTPUTS), d_hist,
+                                    d_sensed, d_grid_c)
             if sums is not None and T and K:
                 d_sv = cuda.to_device(np.zeros((T, K), dtype=np.int64))
                 d_sv2 = cuda.to_device(np.zeros((T, K), dtype=np.int64))
@@ -304,9 +311,9 @@ class CudaBackend(Backend):
                     continue  # reduced on the device
                 if k == "wall_force" and (not wall or sums is not None):
                     continue
-                if k == "history":
-                    if plastic:
-                        res[k].append(d_hist.copy_to_host())
+                if k in extra:  # (outputs of some kernels only)
+                    if extra[k] is not None:
+                        res[k].append(extra[k].copy_to_host())
                     continue
                 res[k].append(d_out[k].copy_to_host())
         self.timings.append({"kernel_s": elapsed, "realizations": R, "launches": launches})

@@ -38,6 +38,8 @@ the root search); the averaged pulse is reduced by ``granchain.backends.cuda.sum
 
 from __future__ import annotations
 
+import math
+
 from numba import cuda, float64, int64
 
 from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
@@ -84,7 +86,7 @@ from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, 
 
 def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False, votes: bool = True,
                 method: str = "rkn4", fixed: bool = False, damped: bool = False, precompressed: bool = False,
-                plastic: bool = False):
+                plastic: bool = False, sensed: bool = False):
     """The batch kernel of ``method`` ("rkn4", "dp5" or "verlet") for ``L`` threads per chain and ``G``
     granules per thread (chains of up to ``L * G`` granules). ``L``, ``G``, the method and ``fixed`` are
     constants of its code: Numba prunes the barriers of ``L = 1`` and the other methods' code, and sizes
@@ -142,6 +144,12 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     left behind would take their contacts' histories with them: ``effective_integrator``). Other kernels take
     ``history`` as an empty tuple, which adds no parameter to their code.
 
+    ``sensed`` (every method and law): the total forces of the contacts ``sensors`` (0-based, the last two
+    arguments: ``sensors`` and ``grid_c``, rows x grid times x sensors) on the grid, as the wall's force is
+    sampled (``kernels.rkloop.sample_grid``): each by the thread that holds the contact's left granule; at the
+    grid times <= 0 its force at t = 0, behind the trailing window NaN (as the CPU's). Other kernels take both
+    as empty tuples.
+
     Barriers: a group exchanges the stage positions through two alternating shared arrays, so that one
     barrier per force evaluation suffices (a thread can only overwrite an array after every thread has
     passed the next barrier, i.e. finished reading it); per step, one for each force evaluation (RKN4
@@ -173,6 +181,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     DAMPED = bool(damped)
     LOADED = bool(precompressed)
     PLASTIC = bool(plastic)
+    SENSED = bool(sensed)
     if PLASTIC and (method != "dp5" or DAMPED):
         raise ValueError("yielding contacts are integrated by DP5 alone, without damping (as the CPU's kernels)")
     LOADED_DAMPED = LOADED and DAMPED  # (one constant: a test of DAMPED nested in LOADED's changed the others' PTX)
@@ -186,10 +195,21 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     step_error = make_error(method, fixed)
     EXPONENT = 0.0 if FIXED else ALPHA[method]
 
+    @cuda.jit(device=True)
+    def grid_force(j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c, n, law, pre, yld):
+        """Contact j's total force (prefactor ``c``) at theta in the step, on the interpolant its method's records
+        are read on, by the chain's law: the wall's force on the grid, and a sensed contact's."""
+        if DAMPED:
+            return dense_law_force(j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c, law, pre)
+        if VERLET:
+            return contact_force(compression(hermite3(hx0[j], hv0[j], hx1[j], hv1[j], h, theta)
+                                             - hermite3(hx0[j + 1], hv0[j + 1], hx1[j + 1], hv1[j + 1], h, theta), j, pre), c, n)
+        return elastic_force(dense_compression(j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre), j, c, n, yld)
+
     @cuda.jit(**options)
     def kernel(masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, pulse_end, prm,
                peak_v, peak_t, peak_f, peak_ft, peak_d, grid_v, grid_f, status_out, steps_out, rejected_out,
-               t_end_out, exit_out, lo_out, frozen_out, diss_out, x_out, v_out, history):
+               t_end_out, exit_out, lo_out, frozen_out, diss_out, x_out, v_out, history, sensors, grid_c):
         if GROUP:
             r = cuda.blockIdx.x
             lane = cuda.threadIdx.x
@@ -341,6 +361,11 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                     grid_f[r, g] = peak_f[r, M - 2]
                 else:
                     grid_f[r, g] = 0.0
+            if SENSED:  # each sensed contact's force at t = 0 (written above by this thread, which holds it)
+                for k in range(sensors.shape[0]):
+                    j = sensors[k]
+                    if j >= own and j < own + G:
+                        grid_c[r, g, k] = peak_f[r, j]
             g += 1
         lo = int64(0)  # the trailing window: granules 0..lo-1 have left the integration
         p0 = forces(x, v, own, M, lo, bxa, c_left, c_right, inv_m, law, a0, pre, yld)
@@ -578,17 +603,14 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                             else:
                                 grid_v[r, g, q] = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
                         if wall and i == M - 2:
-                            if DAMPED:
-                                grid_f[r, g] = dense_law_force(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law,
-                                                               pre)
-                            elif VERLET:
-                                grid_f[r, g] = contact_force(compression(
-                                    hermite3(hx0[M - 2], hv0[M - 2], hx1[M - 2], hv1[M - 2], h, theta)
-                                    - hermite3(hx0[M - 1], hv0[M - 1], hx1[M - 1], hv1[M - 1], h, theta), M - 2, pre), c_right[s], n)
-                            else:
-                                grid_f[r, g] = elastic_force(
-                                    dense_compression(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre), M - 2, c_right[s],
-                                    n, yld)
+                            grid_f[r, g] = grid_force(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], n, law, pre,
+                                                      yld)
+                    if SENSED:
+                        for k in range(sensors.shape[0]):
+                            j = sensors[k]
+                            if j >= own and j < own + G:  # (behind the trailing window: NaN, as the CPU's)
+                                grid_c[r, g, k] = math.nan if j < lo else grid_force(
+                                    j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[j - own], n, law, pre, yld)
                     g += 1
                 before = front
                 front = max(front, group_last(found, red_q, lane))
