@@ -39,6 +39,9 @@ PART_LINES = {
     "7 loaded": r"^\[7 loaded\] decorated N=4, precompressed F0 = 0.01, wall: GPU L=32/shared .*rkn4 rtol.*CPU-\d+ wall / "
                  r"GPU wall = [\d.]+x",
     "7 agree": r"^\[7 agree\] decorated N=4, precompressed .*relative difference of the wall's peak force",
+    "8 yielding": r"^\[8 yielding\] decorated N=4, Thornton's yielding contacts .*GPU L=32/shared .*dp5 rtol.*CPU-\d+ wall / "
+                  r"GPU wall = [\d.]+x",
+    "8 agree": r"^\[8 agree\] decorated N=4, Thornton's .*relative difference of the dissipated energy",
     "summary": r"^\[summary\] decorated integration +<= 1.5 s: (PASS|FAIL) ",
     "summary total": r"^\[summary\] total [\d.]+ s",
 }

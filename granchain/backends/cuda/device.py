@@ -319,10 +319,10 @@ def falls(f0, f1):
 
 
 #: ``kernels.dense.hermite_max_estimate`` (plain arithmetic): the CPU's own function compiled for the GPU.
-hermite_max_estimate = cuda.jit(device=True)(_dense.hermite_max_estimate.py_func)
+hermite_max_estimate = cpu_source(_dense.hermite_max_estimate)
 #: ``kernels.verlet.hermite``, the cubic Hermite interpolant through (y, y') at a step's ends that Verlet's
 #: peaks and grid samples are read on: the CPU's own function compiled for the GPU.
-hermite3 = cuda.jit(device=True)(_verlet.hermite.py_func)
+hermite3 = cpu_source(_verlet.hermite)
 
 
 @cuda.jit(device=True)

@@ -21,6 +21,7 @@ from ..kernels import dp5 as _dp5
 from ..kernels.rkn4 import A10, A20, A21, B0, B1, B2, C1, C2, EB0, EB1, EB2, EB3, EP0, EP1, EP2, EP3, P0, P1, P2, P3
 from ..kernels.rkloop import pi_exponent
 from ..kernels.schemes import DP5, RKN4
+from .device import cpu_source
 
 #: The methods (``Integrator.name``).
 METHODS = ("rkn4", "dp5", "verlet")
@@ -138,10 +139,10 @@ def make_stages(method: str, forces, G: int, damped: bool = False):
 #: its stages' powers ``pw[0..6]`` and that quadrature's embedded error, the CPU's own functions compiled for the
 #: GPU. The quadratures are linear in the powers, so each thread applies them to its own contacts' share and
 #: the group sums the results (``exchange.group_sum``, in a fixed order), where the CPU sums the contacts first.
-dissipated = cuda.jit(device=True)(_dp5.dissipated.py_func)
-dissipated_error = cuda.jit(device=True)(_dp5.dissipated_error.py_func)
+dissipated = cpu_source(_dp5.dissipated)
+dissipated_error = cpu_source(_dp5.dissipated_error)
 #: ``kernels.dp5.over_tolerance``: the dissipated energy's summed error over its tolerance, the CPU's own function.
-over_tolerance = cuda.jit(device=True)(_dp5.over_tolerance.py_func)
+over_tolerance = cpu_source(_dp5.over_tolerance)
 
 
 def make_velocity(method: str):
