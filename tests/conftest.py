@@ -92,6 +92,15 @@ def in_order(b):
     return np.r_[b.peak_time[:-1] <= b.peak_time[1:], True]
 
 
+def completed(r) -> bool:
+    """The integration of ``r`` (a ``PulseResult``) ran to its end: SUCCESS, or PEAK_AT_END, where a late hump
+    (:func:`in_order`) was still rising when the exit rule ended the run and the run says so instead of calling
+    the run's end a maximum (its other peaks and its conservation stand)."""
+    from granchain._status import Status
+
+    return r.status in (Status.SUCCESS, Status.PEAK_AT_END)
+
+
 def _v040_decorated():
     import granchain as gc
 

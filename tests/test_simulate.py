@@ -13,8 +13,8 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import in_order
-from hypothesis import given, settings
+from conftest import completed, in_order
+from hypothesis import example, given, settings
 from hypothesis import strategies as hs
 
 import granchain as gc
@@ -126,10 +126,18 @@ def test_momentum_and_energy_conserved(name, energy_of):
 
 @settings(max_examples=8, deadline=None)
 @given(radii=small_radii)
+@example(radii=[0.01, 0.375, 0.015625, 0.25])
 def test_conservation_on_random_decorated_chains(radii):
+    """Momentum and energy conserved on any decorated chain the integration completes. A completed run may
+    report PEAK_AT_END rather than SUCCESS: a light granule rattling behind a large one can push it to a second,
+    higher hump after the pulse has left the chain (the example: granule 4's velocity still rises at the end,
+    to 0.4714 at t = 19.0 against 0.4676 at the first hump), and the run says its peak is the end of the run
+    instead of reporting it as a maximum; its conservation holds all the same."""
     chain = gc.decorated(radii)
-    r = gc.simulate(chain)
-    assert r.ok, r.message
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # (PEAK_AT_END's warning; the status is checked here)
+        r = gc.simulate(chain)
+    assert completed(r), r.message
     assert abs(r.momentum_error) < 1e-12
     assert np.isfinite(r.energy_error) and abs(r.energy_error) < 1e-4
 

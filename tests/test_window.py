@@ -44,7 +44,7 @@ import math
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import in_order
+from conftest import completed, in_order
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
@@ -638,7 +638,7 @@ def test_windowed_peaks_equal_exact_on_random_decorated_chains(radii):
     chain = gc.decorated(radii)
     a = gc.simulate(chain, gc.DP5.windowed())
     b = gc.simulate(chain, EXACT)
-    assert a.ok and b.ok
+    assert completed(a) and completed(b)  # (a late hump may end a run still rising: PEAK_AT_END, left out below)
     # out-of-order peaks are chaotic late humps (conftest.in_order): on [0.25, 0.0117, 0.375, 0.031,
     # 0.25, 0.0156, 0.25] granule 7 peaks after granule 8 and the two runs differ there by 1.1e-5
     ok = in_order(b)
