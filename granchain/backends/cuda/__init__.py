@@ -24,6 +24,7 @@ Needs an NVIDIA GPU and Numba's CUDA target (``pip install granchain[cuda]``, wh
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -286,14 +287,16 @@ class CudaBackend(Backend):
             if sums is not None and T and K:
                 d_sv = cuda.to_device(np.zeros((T, K), dtype=np.int64))
                 d_sv2 = cuda.to_device(np.zeros((T, K), dtype=np.int64))
-                make_sum_kernel_cached()[-(-(T * K) // 128), 128](d_out["velocity"], d_out["status"], float(scale), d_sv, d_sv2)
+                sum_kernel("make_sum_kernel")[-(-(T * K) // 128), 128](d_out["velocity"], d_out["status"], float(scale),
+                                                                        d_sv, d_sv2)
                 if wall:
                     d_sf = cuda.to_device(np.zeros(T, dtype=np.int64))
-                    make_wall_sum_kernel_cached()[-(-T // 128), 128](d_out["wall_force"], d_out["status"], float(scale), d_sf)
+                    sum_kernel("make_wall_sum_kernel")[-(-T // 128), 128](d_out["wall_force"], d_out["status"], float(scale),
+                                                                          d_sf)
                 if aligned:
                     d_sa = cuda.to_device(np.zeros((lags.size, K), dtype=np.int64))
                     d_sa2 = cuda.to_device(np.zeros((lags.size, K), dtype=np.int64))
-                    make_aligned_sum_kernel_cached()[-(-(lags.size * K) // 128), 128](
+                    sum_kernel("make_aligned_sum_kernel")[-(-(lags.size * K) // 128), 128](
                         d_out["velocity"], d_out["peak_time"], d_out["status"], const[2], d_lags, float(scale), d_sa, d_sa2)
             cuda.synchronize()
             elapsed += time.perf_counter() - t0
@@ -331,31 +334,13 @@ KERNEL_OUTPUTS = ("peak_velocity", "peak_time", "peak_force", "peak_force_time",
                   "frozen_potential", "dissipated_energy", "positions", "velocities")
 
 
-_SUMS: dict = {}
+@functools.cache
+def sum_kernel(name: str):
+    """The reduction kernel ``name`` of ``sums`` (``"make_sum_kernel"``: the averaged pulse, ``"make_wall_sum_kernel"``:
+    the wall force, ``"make_aligned_sum_kernel"``: the aligned pulse), made once per process."""
+    from . import sums
 
-
-def make_sum_kernel_cached():
-    from .sums import make_sum_kernel
-
-    if "v" not in _SUMS:
-        _SUMS["v"] = make_sum_kernel()
-    return _SUMS["v"]
-
-
-def make_aligned_sum_kernel_cached():
-    from .sums import make_aligned_sum_kernel
-
-    if "a" not in _SUMS:
-        _SUMS["a"] = make_aligned_sum_kernel()
-    return _SUMS["a"]
-
-
-def make_wall_sum_kernel_cached():
-    from .sums import make_wall_sum_kernel
-
-    if "f" not in _SUMS:
-        _SUMS["f"] = make_wall_sum_kernel()
-    return _SUMS["f"]
+    return getattr(sums, name)()
 
 
 def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
