@@ -30,15 +30,15 @@ pulse is the CPU's (``kernels.window``). Elastic power-law contacts (Hertz, n = 
 (Kuwabara-Kono, viscous: ``make_kernel``'s ``damped``), free end or fixed wall, precompressed or not
 (``make_kernel``'s ``precompressed``): what else a chain declares is refused by ``CudaBackend.check``.
 
-The step loop calls device functions of three modules: ``granchain.backends.cuda.methods`` (each method's
+The step loop calls device functions of four modules: ``granchain.backends.cuda.methods`` (each method's
 stages and error estimate), ``granchain.backends.cuda.exchange`` (the group's reductions and the
-neighbours' positions for the forces) and ``granchain.backends.cuda.device`` (the force, the dense output,
-the root search); the averaged pulse is reduced by ``granchain.backends.cuda.sums``.
+neighbours' positions for the forces), ``granchain.backends.cuda.observe`` (what a step records: the peaks,
+the grid samples, a yielding contact's turn, the last instant's candidates) and
+``granchain.backends.cuda.device`` (the force, the dense output, the root search); the averaged pulse is
+reduced by ``granchain.backends.cuda.sums``.
 """
 
 from __future__ import annotations
-
-import math
 
 from numba import cuda, float64, int64
 
@@ -46,32 +46,11 @@ from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
 
 # The step control's constants and the stop and window rules: the CPU kernels' own numbers (one source;
 # the GPU code below is the CPU's written for CUDA).
-from ..kernels.rkloop import BETA, HISTORY_RTOL, MAX_FACTOR, MIN_FACTOR, SAFETY, SCREEN, TURN_SLACK
+from ..kernels.rkloop import BETA, MAX_FACTOR, MIN_FACTOR, SAFETY, TURN_SLACK
 from ..kernels.stop import RATTLER_MASS_RATIO
-from .device import (
-    FULL_MASK,
-    ROOT_ACCELERATION,
-    ROOT_APPROACH,
-    ROOT_DAMPED_ACCELERATION,
-    ROOT_FORCE_RATE,
-    compression,
-    contact_force,
-    cut_target,
-    dense_compression,
-    dense_law_force,
-    dense_v,
-    elastic_force,
-    falls,
-    force_rate,
-    hermite3,
-    hermite_max_estimate,
-    law_force,
-    plastic_work,
-    root,
-    static_state,
-    unloading_curve,
-)
+from .device import FULL_MASK, compression, cut_target, falls, force_rate, unloading_curve
 from .exchange import make_exchange
+from .observe import make_observers
 from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, make_stages, make_velocity, over_tolerance
 
 
@@ -184,7 +163,6 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     SENSED = bool(sensed)
     if PLASTIC and (method != "dp5" or DAMPED):
         raise ValueError("yielding contacts are integrated by DP5 alone, without damping (as the CPU's kernels)")
-    LOADED_DAMPED = LOADED and DAMPED  # (one constant: a test of DAMPED nested in LOADED's changed the others' PTX)
     (sync, group_max, group_any, group_last, group_sum, right_neighbour, forces,
      cut_candidates) = make_exchange(L, G, SHUFFLE, VOTES, DAMPED)
     stages = make_stages(method, forces, G, DAMPED)  # (refuses a method it has no stages for, and damping but DP5)
@@ -194,17 +172,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     new_velocity = make_velocity(method)
     step_error = make_error(method, fixed)
     EXPONENT = 0.0 if FIXED else ALPHA[method]
-
-    @cuda.jit(device=True)
-    def grid_force(j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c, n, law, pre, yld):
-        """Contact j's total force (prefactor ``c``) at theta in the step, on the interpolant its method's records
-        are read on, by the chain's law: the wall's force on the grid, and a sensed contact's."""
-        if DAMPED:
-            return dense_law_force(j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c, law, pre)
-        if VERLET:
-            return contact_force(compression(hermite3(hx0[j], hv0[j], hx1[j], hv1[j], h, theta)
-                                             - hermite3(hx0[j + 1], hv0[j + 1], hx1[j + 1], hv1[j + 1], h, theta), j, pre), c, n)
-        return elastic_force(dense_compression(j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre), j, c, n, yld)
+    initial_records, yield_turn, step_peaks, sample_grid, final_records = make_observers(method, G, DAMPED, LOADED,
+                                                                                         PLASTIC, SENSED)
 
     @cuda.jit(**options)
     def kernel(masses, stiffness, v_init, t_limit, obs_of, obs, t_grid, pulse_end, prm,
@@ -329,19 +298,9 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 q_of[s] = obs_of[i]
                 if i == 0:
                     v[s] = v_init[r]
-                if i < M - 1:
-                    peak_f[r, i] = 0.0
-                    peak_ft[r, i] = 0.0
-                    peak_d[r, i] = 0.0
-                    if LOADED:  # the static state, and the force at t = 0: the contact's first peak candidate
-                        pre[0, i], pre[1, i] = static_state(c_right[s], prm[P_STATIC], law)
-                        peak_f[r, i] = pre[1, i]
-                    if LOADED_DAMPED:  # (the struck granule's contact closes at v0: ``peaks.initial_force_records``)
-                        peak_f[r, i] = law_force(pre[0, i], v[s], c_right[s], law)
-                    if PLASTIC:  # virgin contacts: the history starts at the yield overlap (``rkloop.padded_arrays``)
-                        dy = history[r, i]
-                        yld[0, i] = dy if dy > 0.0 else c_right[s] * c_right[s] * prm[P_YIELD]
-                        yld[1, i] = yld[0, i]
+                if i < M - 1:  # the contact's first records (a static state, a yielding contact's history)
+                    initial_records(r, i, v[s], c_right[s], law, prm[P_STATIC], pre, yld, history, prm[P_YIELD], peak_f,
+                                    peak_ft, peak_d)
         if LOADED or PLASTIC:
             sync()
         # The initial state: the first peak candidates, and the grid times <= 0.
@@ -519,99 +478,16 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         ha1[i] = a3[s]
                 sync()
                 if PLASTIC:  # retaken to end where a contact turns from loading to unloading (``rkloop.yield_turn``)
-                    turn = 1.0
-                    for s in range(G):
-                        i = own + s
-                        if i >= lo and i < M - 1:
-                            w0 = hv0[i] - hv0[i + 1]
-                            w1 = hv1[i] - hv1[i + 1]
-                            if falls(w0, w1):
-                                theta = root(ROOT_APPROACH, i, M, w0, w1, hx0, hv0, ha0, hx1, hv1, ha1, h, 0.0, 0.0, 0.0,
-                                             0.0, 0.0, law, pre, yld)
-                                top = dense_compression(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre)
-                                if top > yld[1, i] + HISTORY_RTOL * yld[0, i] and theta < turn:
-                                    turn = theta
-                    turn = -group_max(-turn, red_e, lane)
+                    turn = -group_max(-yield_turn(own, lo, M, hx0, hv0, ha0, hx1, hv1, ha1, h, law, pre, yld), red_e, lane)
                     if turn < 1.0 - TURN_SLACK:
                         n_rej += 1
                         h *= turn
                         continue
-                found = int64(-1)
-                for s in range(G):
-                    i = own + s
-                    q = q_of[s]
-                    if i >= lo and i < M and q >= 0 and falls(a0[s], a3[s]):
-                        if VERLET:  # at the zero of the linearly interpolated acceleration (``kernels.verlet``)
-                            theta = a0[s] / (a0[s] - a3[s])
-                            vpk = hermite3(v[s], a0[s], vs[s], a3[s], h, theta)
-                        else:  # the root of its (damped) acceleration
-                            theta = root(ROOT_DAMPED_ACCELERATION if DAMPED else ROOT_ACCELERATION, i, M, a0[s], a3[s],
-                                         hx0, hv0, ha0, hx1, hv1, ha1, h, c_left[s] if i > lo else 0.0, c_right[s], 0.0,
-                                         inv_m[s], 0.0, law, pre, yld)
-                            vpk = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                        if vpk > peak_v[r, q] + peak_rtol * abs(peak_v[r, q]):
-                            peak_v[r, q] = vpk
-                            peak_t[r, q] = t + theta * h
-                        found = max(found, q)
-                    if i >= lo and i < M - 1:
-                        w0 = hv0[i] - hv0[i + 1]
-                        w1 = hv1[i] - hv1[i + 1]
-                        if DAMPED:
-                            r0 = force_rate(compression(hx0[i] - hx0[i + 1], i, pre), w0, ha0[i] - ha0[i + 1], c_right[s], law)
-                            r1 = force_rate(compression(hx1[i] - hx1[i + 1], i, pre), w1, ha1[i] - ha1[i + 1], c_right[s], law)
-                            if falls(r0, r1):  # the root of the force's rate; the force by the law there
-                                theta = root(ROOT_FORCE_RATE, i, M, r0, r1, hx0, hv0, ha0, hx1, hv1, ha1, h,
-                                             c_left[s] if i > lo else 0.0, c_right[s],
-                                             stiffness[r, i + 1] if i < M - 2 else 0.0, inv_m[s], 1.0 / masses[r, i + 1],
-                                             law, pre, yld)
-                                fp = dense_law_force(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], law, pre)
-                                if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
-                                    peak_f[r, i] = fp
-                                    peak_ft[r, i] = t + theta * h
-                        elif VERLET and falls(w0, w1):  # at the zero of the linearly interpolated relative velocity
-                            theta = w0 / (w0 - w1)
-                            dp = compression(hermite3(hx0[i], hv0[i], hx1[i], hv1[i], h, theta)
-                                             - hermite3(hx0[i + 1], hv0[i + 1], hx1[i + 1], hv1[i + 1], h, theta), i, pre)
-                            fp = contact_force(dp, c_right[s], n)
-                            if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
-                                peak_f[r, i] = fp
-                                peak_ft[r, i] = t + theta * h
-                        elif falls(w0, w1):
-                            d0 = compression(hx0[i] - hx0[i + 1], i, pre)  # (the static overlap included)
-                            d1 = compression(hx1[i] - hx1[i + 1], i, pre)
-                            if hermite_max_estimate(d0, w0, d1, w1, h) >= SCREEN * peak_d[r, i]:
-                                theta = root(ROOT_APPROACH, i, M, w0, w1, hx0, hv0, ha0, hx1, hv1, ha1, h, 0.0, 0.0, 0.0,
-                                             0.0, 0.0, law, pre, yld)
-                                dp = dense_compression(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, pre)
-                                fp = elastic_force(dp, i, c_right[s], n, yld)  # (yielding: the history at the step's start)
-                                if fp > 0.0 and fp > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
-                                    peak_f[r, i] = fp
-                                    peak_ft[r, i] = t + theta * h
-                                    peak_d[r, i] = dp
-                while g < T and t_grid[g] <= t + h:
-                    theta = (t_grid[g] - t) / h
-                    for s in range(G):
-                        i = own + s
-                        q = q_of[s]
-                        if q >= 0:
-                            if windows and t_grid[g] > pulse_end[q]:  # past its averaged-pulse window: not recorded
-                                grid_v[r, g, q] = 0.0
-                            elif i < lo:  # behind the trailing window: the velocity it left with
-                                grid_v[r, g, q] = v[s]
-                            elif VERLET:
-                                grid_v[r, g, q] = hermite3(hv0[i], ha0[i], hv1[i], ha1[i], h, theta)
-                            else:
-                                grid_v[r, g, q] = dense_v(i, hx0, hv0, ha0, hx1, hv1, ha1, h, theta)
-                        if wall and i == M - 2:
-                            grid_f[r, g] = grid_force(M - 2, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[s], n, law, pre,
-                                                      yld)
-                    if SENSED:
-                        for k in range(sensors.shape[0]):
-                            j = sensors[k]
-                            if j >= own and j < own + G:  # (behind the trailing window: NaN, as the CPU's)
-                                grid_c[r, g, k] = math.nan if j < lo else grid_force(
-                                    j, hx0, hv0, ha0, hx1, hv1, ha1, h, theta, c_right[j - own], n, law, pre, yld)
-                    g += 1
+                found = step_peaks(r, t, h, own, lo, M, q_of, v, vs, a0, a3, c_left, c_right, inv_m, masses, stiffness,
+                                   hx0, hv0, ha0, hx1, hv1, ha1, n, law, pre, yld, peak_rtol, peak_v, peak_t, peak_f,
+                                   peak_ft, peak_d)
+                g = sample_grid(g, r, t, h, own, lo, M, q_of, v, c_right, hx0, hv0, ha0, hx1, hv1, ha1, n, law, pre, yld,
+                                t_grid, pulse_end, windows, wall, grid_v, grid_f, sensors, grid_c)
                 before = front
                 front = max(front, group_last(found, red_q, lane))
                 if relax_lag > 0 and front >= relax_lag:
@@ -708,26 +584,8 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                 hx0[i] = x[s]
                 hv0[i] = v[s]
         sync()
-        for s in range(G):
-            i = own + s
-            q = q_of[s]
-            if i >= lo and q >= 0 and a0[s] > 0.0 and v[s] > peak_v[r, q] + peak_rtol * abs(peak_v[r, q]):
-                peak_v[r, q] = v[s]
-                peak_t[r, q] = t
-            if i >= lo and i < M - 1:
-                d = compression(x[s] - hx0[i + 1], i, pre)
-                if d > 0.0 and v[s] - hv0[i + 1] > 0.0:
-                    # (a damped force clamped at 0 never beats the recorded peak, which is >= 0)
-                    f = law_force(d, v[s] - hv0[i + 1], c_right[s], law) if DAMPED else elastic_force(d, i, c_right[s], n, yld)
-                    if f > peak_f[r, i] + peak_rtol * abs(peak_f[r, i]):
-                        peak_f[r, i] = f
-                        peak_ft[r, i] = t
-            if i < M:
-                x_out[r, i] = x[s]
-                v_out[r, i] = v[s]
-            if PLASTIC and i < M - 1:  # the plastic work, a function of the history; the final history returned
-                spent += plastic_work(yld[1, i], c_right[s], yld[0, i])
-                history[r, i] = yld[1, i]
+        spent = final_records(r, t, own, lo, M, q_of, x, v, a0, c_right, hx0, hv0, n, law, pre, yld, peak_rtol, peak_v,
+                              peak_t, peak_f, peak_ft, x_out, v_out, history, spent)
         if PLASTIC:
             spent = group_sum(spent, red_w, lane)
         if lane == 0:
