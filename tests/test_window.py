@@ -554,6 +554,54 @@ def test_windowed_energy_report_and_momentum(seed, kind):
     assert abs(float(np.sum(chain.masses * v)) / chain.momentum - 1.0) < 1e-12
 
 
+def test_energy_errors_of_rows_are_each_runs():
+    """``kernels.forces.energy_errors``, the energy balance of rows integrated elsewhere (the GPU backend's final
+    states), is each run's own report (``simulate``'s) bitwise: windowed decorated rows (granules behind the trailing window, the
+    frozen potential), a precompressed row against a wall (the potential from the static state) and a damped one
+    (the dissipated energy). Negative controls: the rows' frozen potentials, static load or dissipated energies
+    left out change the balance by far more than its drift."""
+    from granchain.backends import final_energy_momentum, history_state
+    from granchain.backends.kernels.forces import energy_errors
+    from granchain.backends.kernels.records import INFO_DISSIPATED
+    from granchain.backends.numba_backend import model_params
+
+    def rows_of(chains, integ):
+        runs = [integrate(chain, integ) for chain in chains]
+        assert all(status == 0 for status, *_ in runs)
+        # each run's report as ``simulate`` makes it (``final_energy_momentum``), E_0 = m_1 v_0^2 / 2
+        e0 = [0.5 * chain.masses[0] * chain.initial_velocity * chain.initial_velocity for chain in chains]
+        reported = [(final_energy_momentum(chain, x, v, info)[0] - e) / e for chain, e, (_, info, x, v, _) in zip(chains, e0, runs)]
+        stack = [np.array([r[k] for r in runs]) for k in (2, 3)]
+        info = np.array([r[1] for r in runs])
+        return (stack, np.array([c.masses for c in chains]), np.array([c.stiffness for c in chains]),
+                info[:, INFO_WINDOW_START].astype(np.int64), info[:, INFO_FROZEN_POTENTIAL], info[:, INFO_DISSIPATED],
+                np.array([c.initial_velocity for c in chains]), np.array(reported))
+
+    def balance(chain, rows, frozen=None, dissipated=None):
+        (x, v), m, c, lo, fr, di, v0, _ = rows
+        out = np.empty(len(v0))
+        assert not history_state(chain)
+        energy_errors(x, v, m, c, model_params(chain), lo, fr if frozen is None else frozen,
+                      di if dissipated is None else dissipated, np.zeros((len(v0), 0)), v0, out)
+        return out
+
+    windowed = [chain_of(seed, "decorated") for seed in FAST_SEEDS]
+    rows = rows_of(windowed, goal_integrators("decorated")["windowed"])
+    assert np.all(rows[3] > 0), "the trailing window did not cut"
+    np.testing.assert_array_equal(balance(windowed[0], rows), rows[-1])
+    assert np.min(np.abs(balance(windowed[0], rows, frozen=np.zeros(3)) - rows[-1])) > 1e-3
+
+    loaded = [chain_of(seed, "decorated").with_wall().with_precompression(0.01) for seed in FAST_SEEDS]
+    rows = rows_of(loaded, gc.RKN4())
+    np.testing.assert_array_equal(balance(loaded[0], rows), rows[-1])
+    assert np.min(np.abs(balance(loaded[0].with_precompression(0.0), rows) - rows[-1])) > 1e-3  # (no static state)
+
+    damped = [chain_of(seed, "effective").replace(contact=gc.Viscoelastic(0.05)) for seed in FAST_SEEDS]
+    rows = rows_of(damped, gc.DP5())
+    np.testing.assert_array_equal(balance(damped[0], rows), rows[-1])
+    assert np.min(np.abs(balance(damped[0], rows, dissipated=np.zeros(3)) - rows[-1])) > 1e-3
+
+
 @pytest.mark.parametrize("seed", [1, 4])
 def test_a_wall_switches_the_goal_settings_off(seed):
     """The pulse comes back from a wall: relaxed and windowed are bitwise the exact DP5 there."""

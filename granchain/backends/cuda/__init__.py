@@ -344,37 +344,20 @@ def sum_kernel(name: str):
 
 
 def _energy_errors(chain, masses, stiffness, v0, res) -> np.ndarray:
-    """(E_end + E_dissipated - E_0) / E_0 per row (``kernels.forces.final_energy``): kinetic energy of every granule (a
-    wall's left out; granules behind the trailing window keep the velocity they left with), the potential
-    (c / n) delta^n (Eq. hertz-1) of the contacts still integrated at the end, and the potential the
-    contacts behind the window held when they left it; E_0 = m_1 v_0^2 / 2. In a precompressed chain the
-    potential is measured from the static state (``kernels.forces.add_potential``): V(delta0 + D) - V(delta0) - f0 D
-    for each contact, D = x_j - x_{j+1} (Nesterenko 2001, Sec. 1.1). Yielding contacts: the elastic energy each one
-    gives back depends on its final history, by the CPU's own ``kernels.forces.plastic_energy``, and the plastic
-    work is the dissipated energy."""
-    e0 = 0.5 * masses[:, 0] * v0 * v0
-    if chain.contact.history:
-        from ..kernels.forces import plastic_energy
-        from ..numba_backend import model_params
+    """(E_end + E_dissipated - E_0) / E_0 per row, by the CPU kernels' own function
+    (``kernels.forces.energy_errors``: one definition of each realisation's energy balance for both backends),
+    from the final states, trailing windows, frozen potentials, dissipated energies and (yielding contacts)
+    histories the GPU returned."""
+    from ..kernels.forces import energy_errors
+    from ..numba_backend import model_params
 
-        params = model_params(chain)
-        rows = zip(res["positions"], res["velocities"], masses, stiffness, res["history"])
-        e1 = np.array([plastic_energy(x, v, np.ascontiguousarray(m), np.ascontiguousarray(c), params, hist)
-                       for x, v, m, c, hist in rows])
-        with np.errstate(invalid="ignore"):
-            return (e1 + res["dissipated_energy"] - e0) / e0
-    n = float(chain.n)
-    x, v, lo = res["positions"], res["velocities"], res["window_start"]
-    finite = np.isfinite(masses)
-    kinetic = 0.5 * np.sum(np.where(finite, masses, 0.0) * v * v, axis=1)
-    D = x[:, :-1] - x[:, 1:]
-    c = stiffness[:, : D.shape[1]]
-    integrated = np.arange(D.shape[1])[None, :] >= lo[:, None]
-    if chain.precompression.applied:  # (no trailing window: every contact is integrated to the end)
-        d0 = chain.precompression.overlaps(c, n)
-        stored = c * np.maximum(d0 + D, 0.0) ** n - c * d0**n - n * c * d0 ** (n - 1.0) * D
-    else:
-        stored = c * np.maximum(D, 0.0) ** n
-    potential = np.sum(np.where(integrated, stored, 0.0), axis=1) / n + res["frozen_potential"]
-    with np.errstate(invalid="ignore"):
-        return (kinetic + potential + res["dissipated_energy"] - e0) / e0
+    def rows(a, dtype=float):
+        return np.ascontiguousarray(a, dtype=dtype)
+
+    R = masses.shape[0]
+    history = res["history"] if chain.contact.history else np.zeros((R, 0))
+    out = np.empty(R)
+    energy_errors(rows(res["positions"]), rows(res["velocities"]), rows(masses), rows(stiffness), model_params(chain),
+                  rows(res["window_start"], np.int64), rows(res["frozen_potential"]), rows(res["dissipated_energy"]),
+                  rows(history), rows(v0), out)
+    return out

@@ -27,7 +27,7 @@ from numba import njit, prange
 from ..._status import SUCCESS
 from .aligned import accumulate_aligned
 from .queue import take
-from .forces import final_energy, impulse_energy, plastic_energy
+from .forces import energy_error as run_energy_error
 from .jit import JIT, JIT_PARALLEL
 from .records import (
     INFO_DISSIPATED,
@@ -165,13 +165,8 @@ def integrate_batch(kernel, batch, method, run, tally, rows, sums, partials):
             status[r] = st
             n_steps[r] = np.int64(info[INFO_STEPS])
             t_end[r] = info[INFO_T_END]
-            e0 = impulse_energy(m[0], v_init[r])
             dissipated[r] = info[INFO_DISSIPATED]
-            if params.yield_overlap > 0.0:  # the elastic energy of a yielded contact depends on its history
-                e1 = plastic_energy(x, v, m, c, params, history) + info[INFO_DISSIPATED]
-            else:
-                e1 = final_energy(x, v, m, c, params, info) + info[INFO_DISSIPATED]
-            energy_error[r] = (e1 - e0) / e0
+            energy_error[r] = run_energy_error(x, v, m, c, params, info, history, v_init[r])
             if st == SUCCESS:
                 cnt[tid] += 1
                 accumulate_fixed_point(grid_v, scale, acc1[tid], acc2[tid])

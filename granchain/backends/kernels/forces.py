@@ -23,10 +23,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from .jit import JIT, JIT_INLINE, JIT_INTERNAL, named
-from .records import INFO_FROZEN_POTENTIAL, INFO_WINDOW_START
+from .records import INFO_DISSIPATED, INFO_FROZEN_POTENTIAL, INFO_SIZE, INFO_WINDOW_START
 
 # Fast paths for the contact power delta^(n-1).
 POW_GENERAL = 0
@@ -356,6 +357,35 @@ def final_energy(x, v, m, c, p, info):
     for k in range(lo):
         e += 0.5 * m[k] * v[k] * v[k]
     return e + total_energy(x[lo:], v[lo:], m[lo:], c[lo:], p)
+
+
+@njit(**JIT)
+def energy_error(x, v, m, c, p, info, history, v0):
+    """(E_end + E_dissipated - E_0) / E_0 of a finished run struck with ``v0``, the energy balance's drift each
+    realisation reports: E_0 by :func:`impulse_energy`; E_end by :func:`final_energy`, or for Thornton's
+    yielding contacts by :func:`plastic_energy` (the elastic energy a yielded contact gives back depends on its
+    history, ``history``), and E_dissipated = ``info[INFO_DISSIPATED]`` (damped contacts: integrated with the
+    motion; yielding ones: the plastic work)."""
+    e0 = impulse_energy(m[0], v0)
+    if p.yield_overlap > 0.0:
+        e1 = plastic_energy(x, v, m, c, p, history) + info[INFO_DISSIPATED]
+    else:
+        e1 = final_energy(x, v, m, c, p, info) + info[INFO_DISSIPATED]
+    return (e1 - e0) / e0
+
+
+@njit(**JIT)
+def energy_errors(x, v, m, c, p, window_start, frozen, dissipated, history, v0, out):
+    """:func:`energy_error` of each row of runs integrated elsewhere (the GPU's: final positions ``x`` and
+    velocities ``v``, masses ``m``, stiffnesses ``c``, rows x granules; each row's first integrated granule
+    ``window_start``, frozen potential ``frozen``, dissipated energy ``dissipated``, contacts' ``history`` (rows
+    x 0 for laws without one) and initial velocity ``v0``) into ``out``."""
+    info = np.zeros(INFO_SIZE)
+    for r in range(x.shape[0]):
+        info[INFO_WINDOW_START] = window_start[r]
+        info[INFO_FROZEN_POTENTIAL] = frozen[r]
+        info[INFO_DISSIPATED] = dissipated[r]
+        out[r] = energy_error(x[r], v[r], m[r], c[r], p, info, history[r], v0[r])
 
 
 @njit(**JIT)
