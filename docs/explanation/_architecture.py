@@ -44,14 +44,14 @@ BOXES = {
     "stats": (11.0, 6.75, 4.6, 2.2, STATS, True, "statistics and theories",
               "granchain.analysis\n(+ pulsefits, jackknife)\ngranchain.bca (BCA)\ngranchain.theory"),
     "backends": (1.4, 4.15, 5.9, 1.95, CORE, False, "granchain.backends",
-                 "get_backend('numba' | 'scipy'), Backend.check,\neffective_integrator, integrator_as_run\n"
-                 "numba_backend; scipy_backend (DOP853)"),
+                 "get_backend('numba' | 'scipy' | 'cuda'), Backend.check,\neffective_integrator, integrator_as_run\n"
+                 "numba_backend; scipy_backend (DOP853);\ncuda (the GPU backend, optional)"),
     "solve": (8.6, 4.15, 6.0, 1.95, CORE, False, "granchain.solve",
               "integrators: values with capabilities\n(DP5, RKN4, Verlet, DOP853; INTEGRATORS)\n"
               "simulate(chain) -> PulseResult"),
     "kernels": (1.4, 2.0, 5.2, 1.6, CORE, True, "granchain.backends.kernels (Numba)",
-                "records (Params, Model, Method, Run, ...), forces,\nwindow, stop, peaks, dense, rkloop, dp5, rkn4,\n"
-                "verlet, dispatch, batch, aligned, memory, jit"),
+                "records (Params, Model, Method, Run, ...), forces,\nwindow, stop, peaks, dense, rkloop, observe, dp5,\n"
+                "rkn4, verlet, dispatch, batch, aligned, memory, jit"),
     "units": (8.6, 2.0, 4.9, 1.6, UNITS, False, "granchain.units",
               "physical units (paper Sec. II\nrescaling): the units attributes\nof every result"),
     "model": (0.4, 0.2, 15.2, 1.3, CORE, False, "granchain.model",

@@ -114,7 +114,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     in a shared array (``device.elastic_force`` reads them: the loading line beyond the history, the unloading
     curve from it below); the history moves after each accepted step, never within one, so an accepted step in
     which a contact on its loading line turns back (its compression peaks beyond its history) is retaken to end
-    at the turn (``kernels.rkloop.yield_turn``: the turn located on the dense output, where the stages past it
+    at the turn (``kernels.observe.yield_turn``: the turn located on the dense output, where the stages past it
     followed the loading line while the contact unloads). The last argument ``history`` holds each chain's yield
     overlaps on entry (0: c_j^2 ``P_YIELD``, spheres of one material) and its final histories on return; the
     dissipated energy written is the plastic work of the final histories (``kernels.forces.plastic_work``). The
@@ -125,7 +125,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
 
     ``sensed`` (every method and law): the total forces of the contacts ``sensors`` (0-based, the last two
     arguments: ``sensors`` and ``grid_c``, rows x grid times x sensors) on the grid, as the wall's force is
-    sampled (``kernels.rkloop.sample_grid``): each by the thread that holds the contact's left granule; at the
+    sampled (``kernels.observe.sample_grid``): each by the thread that holds the contact's left granule; at the
     grid times <= 0 its force at t = 0, behind the trailing window NaN (as the CPU's). Other kernels take both
     as empty tuples.
 
@@ -452,7 +452,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                     if i < M - 1:
                         w0 = v[s] - (v[s + 1] if s < G - 1 else vr0)
                         w1 = vs[s] - (vs[s + 1] if s < G - 1 else vr1)
-                        if DAMPED:  # a damped contact's force peaks where its rate falls (``kernels.rkloop.force_peaks``)
+                        if DAMPED:  # a damped contact's force peaks where its rate falls (``kernels.observe.force_peaks``)
                             w0 = force_rate(compression(x[s] - (x[s + 1] if s < G - 1 else xr0), i, pre), w0,
                                             a0[s] - (a0[s + 1] if s < G - 1 else ar0), c_right[s], law)
                             w1 = force_rate(compression(xs[s] - (xs[s + 1] if s < G - 1 else xr1), i, pre), w1,
@@ -477,7 +477,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
                         hv1[i] = vs[s]
                         ha1[i] = a3[s]
                 sync()
-                if PLASTIC:  # retaken to end where a contact turns from loading to unloading (``rkloop.yield_turn``)
+                if PLASTIC:  # retaken to end where a contact turns from loading to unloading (``kernels.observe.yield_turn``)
                     turn = -group_max(-yield_turn(own, lo, M, hx0, hv0, ha0, hx1, hv1, ha1, h, law, pre, yld), red_e, lane)
                     if turn < 1.0 - TURN_SLACK:
                         n_rej += 1

@@ -3,7 +3,7 @@ candidate, a yielding contact's history), the peaks an accepted step holds (velo
 granules, force maxima of the contacts), the grid samples (the averaged pulse's velocities, the wall's force, the
 sensed contacts' forces), the turn of a yielding contact that retakes a step, and the last instant's candidates.
 Device functions compiled for a kernel's method and contacts (:func:`make_observers`), which the step loop
-(``kernel.make_kernel``) calls, as the CPU's step loop calls its record blocks (``kernels.rkloop``:
+(``kernel.make_kernel``) calls, as the CPU's step loop calls its record blocks (``kernels.observe``:
 ``sample_grid``, ``force_peaks``, ``yield_turn``; ``kernels.peaks``: ``final_peaks``, ``initial_force_records``).
 
 Each works on the granules its thread holds (``own`` .. ``own + G - 1``). Those that read a neighbour's state
@@ -21,7 +21,7 @@ from collections import namedtuple
 
 from numba import cuda, int64
 
-from ..kernels.rkloop import HISTORY_RTOL, SCREEN
+from ..kernels.observe import HISTORY_RTOL, SCREEN
 from .device import (
     ROOT_ACCELERATION,
     ROOT_APPROACH,
@@ -93,7 +93,7 @@ def make_observers(method: str, G: int, damped: bool, precompressed: bool, plast
     @cuda.jit(device=True)
     def yield_turn(own, lo, M, hx0, hv0, ha0, hx1, hv1, ha1, h, law, pre, yld):
         """The earliest turn in the step, as a fraction of it (1 where none), of this thread's contacts on their
-        loading line: where a contact's compression peaks beyond its history (``kernels.rkloop.yield_turn``)."""
+        loading line: where a contact's compression peaks beyond its history (``kernels.observe.yield_turn``)."""
         turn = 1.0
         for s in range(G):
             i = own + s
@@ -115,7 +115,7 @@ def make_observers(method: str, G: int, damped: bool, precompressed: bool, plast
         velocity maximum (the root of its acceleration, damped or not: ``kernels.dense``; Verlet's at the zero of
         the linearly interpolated acceleration, ``kernels.verlet``) and a contact's force maximum (the root of the
         relative velocity where the compression screen passes it, of a damped force's rate:
-        ``kernels.rkloop.force_peaks``). Returns the latest observed granule (its index among them) whose
+        ``kernels.observe.force_peaks``). Returns the latest observed granule (its index among them) whose
         acceleration fell in the step, or -1: the pulse's front."""
         found = int64(-1)
         for s in range(G):
@@ -175,7 +175,7 @@ def make_observers(method: str, G: int, damped: bool, precompressed: bool, plast
     def sample_grid(g, r, t, h, own, lo, M, q_of, v, c_right, hx0, hv0, ha0, hx1, hv1, ha1, n, law, pre, yld,
                     t_grid, pulse_end, windows, wall, grid_v, grid_f, sensors, grid_c):
         """The grid times from index ``g`` that fall in the step from t to t + h, sampled on this thread's
-        granules (``kernels.rkloop.sample_grid``): the observed granules' velocities (0 past a granule's
+        granules (``kernels.observe.sample_grid``): the observed granules' velocities (0 past a granule's
         averaged-pulse window, the velocity it left with behind the trailing window), the wall's force and the
         sensed contacts' (NaN behind the trailing window). Returns the next grid index."""
         T = t_grid.shape[0]

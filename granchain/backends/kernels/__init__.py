@@ -11,7 +11,8 @@ it validates, allocates, fills the records and calls the kernel :func:`~granchai
 - ``stop``: when the pulse has left (free end) or come back (wall);
 - ``peaks``: peak records, the state at t = 0, the ``info`` record;
 - ``dense``: dense output of the Runge-Kutta steps and the roots found on it;
-- ``rkloop``: the adaptive Runge-Kutta step loop; ``dp5`` and ``rkn4``: the tableaux it runs;
+- ``rkloop``: the adaptive Runge-Kutta step loop; ``observe``: what its accepted steps record (peaks, grid
+  samples, a yielding contact's turn); ``dp5`` and ``rkn4``: the tableaux it runs;
 - ``verlet``: velocity Verlet;
 - ``dispatch``: the single-chain entry points; ``batch``: the parallel ensemble driver, which calls them
   through their addresses;

@@ -243,7 +243,7 @@ def falls(f0, f1):
 def hermite_max_estimate(d0, w0, d1, w1, h):
     """The cubic Hermite interpolant of the compression through (d0, w0) and (d1, w1) over a step h,
     at the zero of the linearly interpolated relative velocity w (w0 > 0 >= w1): an estimate of the
-    compression maximum, used only to skip hopeless root searches (``rkloop.SCREEN``)."""
+    compression maximum, used only to skip hopeless root searches (``observe.SCREEN``)."""
     theta = w0 / (w0 - w1)
     t2 = theta * theta
     t3 = t2 * theta
