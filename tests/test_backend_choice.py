@@ -178,6 +178,53 @@ def test_cli_backend_cuda_without_a_gpu_is_one_line_and_exit_2(command, tmp_path
     assert "Traceback" not in proc.stderr and not any(tmp_path.iterdir())  # refused before anything was written
 
 
+#: Makes ``numba.cuda`` fail on import as an installed numba-cuda does under a NumPy it does not support (a
+#: release calling ``np.row_stack`` under NumPy 2.5: an AttributeError, not an ImportError).
+BROKEN_NUMBA_CUDA = """
+import importlib.abc, sys
+class Broken(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name == "numba.cuda" or name.startswith("numba.cuda."):
+            raise AttributeError("module 'numpy' has no attribute 'row_stack'")
+        return None
+sys.meta_path.insert(0, Broken())
+"""
+
+
+def test_a_numba_cuda_that_breaks_on_import_is_one_line_and_exit_2(tmp_path):
+    """An installed numba-cuda that raises something other than ImportError on import (a release calling np.row_stack
+    does so under NumPy 2.5) is a reason the backend cannot run, said in one line, never a traceback; and without
+    ``--backend cuda`` nothing imports it (the CPU run works)."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
+    code = BROKEN_NUMBA_CUDA + (
+        "from granchain.backends import cuda\n"
+        "ok, why = cuda.available()\n"
+        "assert not ok and 'fails to import (AttributeError' in why and 'NumPy' in why, why\n"
+        "from granchain.cli import main\n"
+        "sys.exit(main(sys.argv[1:]))\n")
+    store = tmp_path / "s.zarr"
+    argv = ["ensemble", "--large", "4", "--realizations", "2", "--quiet", "--out", str(store)]
+    proc = subprocess.run([sys.executable, "-c", code, *argv, "--backend", "cuda"], capture_output=True, text=True,
+                          env=env, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("granchain ensemble: error: the cuda backend cannot run here"), proc.stderr
+    assert "fails to import" in lines[0] and "backend='cpu'" in lines[0] and not store.exists()
+    proc = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0 and store.exists(), proc.stderr  # the negative control: the CPU never needs numba.cuda
+
+
+def test_the_chunk_size_help_gives_each_backends_default(capsys):
+    """``--chunk-size``'s help states the defaults a new store takes, the numbers the backends ask for."""
+    from granchain.backends.cuda import CudaBackend
+    from granchain.ensembles.backend import CPU_CHUNK_SIZE
+
+    with pytest.raises(SystemExit):
+        main(["ensemble", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"{CPU_CHUNK_SIZE} on the cpu, {CudaBackend.default_chunk_size} on cuda" in text
+
+
 def test_design_rows_on_a_chosen_backend_equal_the_defaults():
     from granchain.design import TaperedSpace
     from granchain.design.evaluate import default_integrator, run_rows

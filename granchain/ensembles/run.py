@@ -138,7 +138,8 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
     chunk_size : int, optional
         Realisations per chunk: the unit of work, of saving and of resuming. Default: when ``out`` is an
         existing store, the chunk size it was started with; else the backend's ``default_chunk_size``
-        (500 on the CPU; a GPU asks for about 10,000, the chains it needs per launch to fill its cores).
+        (500 on the CPU; 30,000 on the GPU, the paper's ensemble in one launch: a launch needs thousands of
+        chains to fill the GPU and lasts until its slowest chain ends).
     out : path, optional
         Zarr store to write (and resume). Without it the results stay in memory.
     resume : bool

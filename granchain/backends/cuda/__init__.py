@@ -51,6 +51,10 @@ def available() -> tuple[bool, str]:
         from numba import cuda
     except ImportError as exc:  # pragma: no cover - numba without its CUDA target
         return False, f"Numba's CUDA target is not installed ({exc}): pip install granchain[cuda]"
+    except Exception as exc:  # noqa: BLE001 - an installed numba-cuda that breaks on import
+        # (as a numba-cuda release that calls np.row_stack does under NumPy 2.5, which removed it: AttributeError)
+        return False, (f"Numba's CUDA target is installed but fails to import ({type(exc).__name__}: {exc}); "
+                       f"it may not support NumPy {np.__version__}: upgrade numba-cuda, or install a NumPy it supports")
     try:
         if cuda.is_available():
             return True, ""
