@@ -1,17 +1,17 @@
 """What the adaptive Runge-Kutta step loop (``rkloop.rk_kernel``) records in an accepted step: the velocity
 maxima of the observed granules (:func:`velocity_peaks`), the contact-force maxima (:func:`force_peaks`), the
 grid samples of the averaged pulse, the wall's force and the sensed contacts' forces (:func:`sample_grid`), and
-the turn of a yielding contact that retakes the step (:func:`yield_turn`). The records of a run's first and last
-instants are ``peaks``'; the GPU's step loop records the same through ``granchain.backends.cuda.observe``.
+the turn of a yielding contact that retakes the step (:func:`yield_turn`). A run's first and last instants are
+recorded by ``peaks``; the GPU's step loop records the same through ``granchain.backends.cuda.observe``.
 
 Each block is a function of its own inlined into the loop at Numba-IR level (``JIT_INLINE``: the same code as
 written out there, no call and no reference counting). They call the scheme's functions (``SCHEME.weights``,
-``SCHEME.dense_data``), so the step loop compiles each once per scheme, with ``SCHEME`` bound as in the kernel
-(``rkloop._specialised``: the name is a global of this module set there); each returns the loop state it
-moves. A lazy scheme (RKN4) lays its dense output into the stage arrays only when a block needs it
-(``dense_ready``; laid out every step, it cost RKN4 16 % of an N = 26 decorated chain's time); until then its
-step's end is in Kv[6] and VS. DP5's dense output is its stages. Moving the blocks here from the step loop's
-module changed none of its machine code.
+``SCHEME.dense_data``), so the step loop compiles each once per scheme, with ``SCHEME`` bound as in the
+kernel (``rkloop._specialised`` reads it as ``_scheme_<name>``, a global of this module that it sets); each
+returns the loop state it moves. A lazy scheme (RKN4) lays its dense output into the stage arrays only when a
+block needs it (``dense_ready``; laid out every step, it cost RKN4 16 % of an N = 26 decorated chain's time);
+until then its step's end is in Kv[6] and VS. DP5's dense output is its stages. Moving the blocks here from the
+step loop's module changed none of its machine code.
 """
 
 from __future__ import annotations
