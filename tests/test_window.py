@@ -215,6 +215,7 @@ def test_peaks_match_dop853(dop853, seed, kind, name):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("dop853_sweep")  # one worker: its DOP853 references are computed once for all integrators
 @pytest.mark.parametrize("kind, name", GOAL_CASES)
 def test_peaks_match_dop853_sweep(dop853, kind, name):
     """20 seeded chains of each kind (DOP853 takes ~2.5 s per decorated chain; cached for all integrators)."""
