@@ -8,9 +8,11 @@ the same run:
 
 1. ``[1 gpu]``: the paper's decorated N = 26 set (``granchain.RandomDecorated(26)``, small radii
    U[0.01, 0.4]), 30,000 realisations, seed 0, on ``CudaBackend(threads_per_chain=L)`` for L = 32 (one
-   warp per chain: warp shuffles with votes, the default; shuffle trees for the integer reductions;
-   capped at 168 registers, which ptxas reaches without spills, and at 128, with some
-   (``benchmarks/gpu_registers.py``); shared memory) and 1 (one thread per chain: 3,000 realisations,
+   warp per chain: warp shuffles with votes, the default; the same with Hertz's exponent compiled into the
+   kernel, ``compiled_exponent=True``, which drops the general power's registers, uncapped and capped at
+   168; shuffle trees for the integer reductions; capped at 168 registers, which ptxas reaches without
+   spills at G = 1 (``benchmarks/gpu_registers.py``; 128 spilled 956/1,796 B at G = 2 and is no longer
+   timed, to leave the budget to the later parts); shared memory) and 1 (one thread per chain: 3,000 realisations,
    scaled linearly, said in the line; L = 64 ran 3.5x slower than 32 on an H200 and is no longer timed);
    the integration time is the backend's own (``timings``: device time, synchronised, summed
    over the run's batches, the pulse-window pilot included), the wall time is ``run_ensemble``'s; then
@@ -140,9 +142,10 @@ class Sizes:
     ensemble_kw: tuple = ()
     #: The layouts of part 1 (``--layouts``): threads per chain, then optionally the exchange ("shuffle":
     #: warp shuffles, the default at 32; "shared": shared memory and barriers), a register cap, and
-    #: "butterfly" (the shuffle exchange's integer reductions by shuffle trees, not warp votes). The
-    #: variants of the default layout first, so that a tight budget skips the slow ones.
-    layouts: tuple = ("32", "32/butterfly", "32/168", "32/128", "32/shared", "1")
+    #: "butterfly" (the shuffle exchange's integer reductions by shuffle trees, not warp votes), and "n" (the
+    #: chains' exponent compiled into the kernel: ``CudaBackend(compiled_exponent=True)``). The variants of
+    #: the default layout first, so that a tight budget skips the slow ones.
+    layouts: tuple = ("32", "32/n", "32/n/168", "32/butterfly", "32/168", "32/shared", "1")
     #: The layout the other parts compare with (the backend's default: one warp per chain, shuffles).
     reference: str = "32"
 
@@ -156,7 +159,7 @@ SMOKE = Sizes(n_large=4, realizations=2, naive=2, warmup=1, cpu16=2, sweep=4, ag
               ensemble_kw=(("pulse_window", "full"), ("max_steps", 20)),
               # (the simulator emulates a warp shuffle with two barriers of 32 Python threads: ~1 minute for the
               # smoke run's 40 steps; tests/test_cuda.py checks the shuffle layout)
-              layouts=("32/shared", "1"), reference="32/shared")
+              layouts=("32/shared", "1", "1/n"), reference="32/shared")
 
 
 # --------------------------------------------------------------------------- the GPU backend's contract
@@ -172,17 +175,17 @@ class StubBackend:
 
 
 def parse_layout(layout) -> tuple:
-    """(threads per chain, exchange or None, max_registers or None, votes) of a layout
-    "L[/exchange][/regs][/butterfly]" ("butterfly": the shuffle exchange's integer reductions by shuffle
-    trees instead of warp votes). ValueError for anything else."""
+    """(threads per chain, exchange or None, max_registers or None, votes, compiled exponent) of a layout
+    "L[/exchange][/regs][/butterfly][/n]" ("butterfly": the shuffle exchange's integer reductions by shuffle
+    trees instead of warp votes; "n": the exponent compiled into the kernel). ValueError for anything else."""
     parts = str(layout).split("/")
-    known = ("shuffle", "shared", "butterfly")
+    known = ("shuffle", "shared", "butterfly", "n")
     for p in parts[1:]:
         if not (p in known or p.isdigit()):
             raise ValueError(f"unknown layout option {p!r} in {layout!r} (known: {', '.join(known)}, a register count)")
     exchange = next((p for p in parts[1:] if p in ("shuffle", "shared")), None)
     regs = next((int(p) for p in parts[1:] if p.isdigit()), None)
-    return int(parts[0]), exchange, regs, "butterfly" not in parts[1:]
+    return int(parts[0]), exchange, regs, "butterfly" not in parts[1:], "n" in parts[1:]
 
 
 def layout_key(layout):
@@ -191,14 +194,14 @@ def layout_key(layout):
 
 
 def gpu_backend(layout, stub: bool):
-    """The GPU backend of a layout (``CudaBackend(threads_per_chain=L, exchange=..., max_registers=..., votes=...)``;
-    :func:`parse_layout`), or the stub."""
-    L, exchange, regs, votes = parse_layout(layout)
+    """The GPU backend of a layout (``CudaBackend(threads_per_chain=L, exchange=..., max_registers=..., votes=...,
+    compiled_exponent=...)``; :func:`parse_layout`), or the stub."""
+    L, exchange, regs, votes, exponent = parse_layout(layout)
     if stub:
         return StubBackend(L)
     from granchain.backends.cuda import CudaBackend
 
-    return CudaBackend(threads_per_chain=L, exchange=exchange, max_registers=regs, votes=votes)
+    return CudaBackend(threads_per_chain=L, exchange=exchange, max_registers=regs, votes=votes, compiled_exponent=exponent)
 
 
 def ensemble(run, realizations, seed, chains, *, backend=None, chunk_size=None, threads=None, integrator=None,
@@ -447,7 +450,8 @@ def part_gpu(run: Run) -> None:
             R = s.naive if L == 1 else s.realizations
             if not run.stub:
                 label += (f" ({backend.exchange} exchange{', warp votes' if backend.votes else ''}, "
-                          f"max_registers {backend.max_registers})")
+                          f"max_registers {backend.max_registers}"
+                          f"{', exponent compiled in' if backend.compiled_exponent else ''})")
             scale = s.realizations / R
             ds, kernel, wall, timings = gpu_run(run, backend, chains, R, integrator=method)
         except Exception as exc:  # noqa: BLE001 (one layout failing leaves the others)
@@ -769,8 +773,8 @@ def main(argv=None) -> int:
                                                             "1,2,3,4,5,6,7,8)")
     ap.add_argument("--layouts", default=None, help="part 1's layouts, comma-separated: threads per chain, then "
                                                     "optionally /shuffle or /shared, /REGS (a register cap) and "
-                                                    "/butterfly (no warp votes); default "
-                                                    "32,32/butterfly,32/168,32/128,32/shared,1")
+                                                    "/butterfly (no warp votes), /n (the exponent compiled in); "
+                                                    "default 32,32/n,32/n/168,32/butterfly,32/168,32/shared,1")
     ap.add_argument("--budget", type=float, default=None, help="seconds the run may take; parts that no longer fit are "
                                                                "skipped (default 330 full, 170 smoke)")
     args = ap.parse_args(argv)

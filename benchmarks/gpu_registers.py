@@ -137,15 +137,17 @@ def signature(plastic: bool = False, sensed: bool = False):
 
 
 def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxas: str, fixed: bool = False,
-           damped: bool = False, precompressed: bool = False, plastic: bool = False, sensed: bool = False) -> dict:
-    """Compile one kernel to PTX (NVVM) and assemble it (ptxas -v): its resources and digest."""
+           damped: bool = False, precompressed: bool = False, plastic: bool = False, sensed: bool = False,
+           exponent: float | None = None) -> dict:
+    """Compile one kernel to PTX (NVVM) and assemble it (ptxas -v): its resources and digest. ``exponent``: the
+    contact law's n compiled in (``make_kernel``'s ``exponent``; None: read at run time, the default kernels)."""
     from numba import cuda
 
     from granchain.backends.cuda import BLOCK_THREADS
     from granchain.backends.cuda.kernel import make_kernel
 
     kernel = make_kernel(L, G, cap, exchange == "shuffle", exchange == "shuffle", method, fixed, damped, precompressed,
-                         plastic, sensed)
+                         plastic, sensed, exponent)
     ptx, _ = cuda.compile_ptx(kernel.py_func, signature(plastic, sensed), cc=tuple(cc))
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "kernel.ptx")
@@ -163,11 +165,13 @@ def report(method: str, L: int, exchange: str, G: int, cap: int | None, cc, ptxa
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cc", default="9.0", help="compute capability, e.g. 9.0 (H100, H200) or 8.0 (A100); default 9.0")
-    ap.add_argument("--methods", default="rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic",
+    ap.add_argument("--methods", default="rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic,rkn4-hertz",
                     help="methods, comma-separated; a suffix -damped: for contacts that dissipate (DP5 only), "
                          "-plastic: for contacts that yield (DP5 only, instead of -damped), -precompressed: for "
-                         "precompressed chains, -sensed: with force sensors on the grid, after the others (default "
-                         "rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic)")
+                         "precompressed chains, -sensed: with force sensors on the grid, -hertz: Hertz's n = 5/2 "
+                         "compiled into the kernel (CudaBackend(compiled_exponent=True); also at G = 2, the decorated "
+                         "chains'), after the others (default "
+                         "rkn4,dp5,verlet,dp5-damped,rkn4-precompressed,dp5-plastic,rkn4-hertz)")
     ap.add_argument("--caps", default="168,128,96", help="register caps tried on the default layout (default 168,128,96)")
     args = ap.parse_args(argv)
     try:
@@ -191,13 +195,14 @@ def main(argv=None) -> int:
     cases += [("rkn4", 32, "shuffle", 2, None), ("rkn4", 32, "shared", 1, None), ("rkn4", 64, "shared", 1, None),
               ("rkn4", 1, "shared", 32, None)]
     cases += [(m, 32, "shuffle", 1, None) for m in methods if m != "rkn4"]
+    cases += [(m, 32, "shuffle", 2, None) for m in methods if m.endswith("-hertz")]  # the decorated chains' G
     base = None
     for method, L, exchange, G, cap in cases:
         if method not in methods:
             continue
         name, damped, precompressed = method.partition("-")[0], "-damped" in method, "-precompressed" in method
         r = report(name, L, exchange, G, cap, cc, ptxas, damped=damped, precompressed=precompressed,
-                   plastic="-plastic" in method, sensed="-sensed" in method)
+                   plastic="-plastic" in method, sensed="-sensed" in method, exponent=2.5 if "-hertz" in method else None)
         base = r if base is None else base
         print(f"[registers sm_{cc[0]}{cc[1]}] {method} L={L} {exchange} G={G} cap {cap or 'none'}: "
               f"{r['registers']} registers, spills {r['spill_stores']} B stored / {r['spill_loads']} B loaded, "

@@ -299,7 +299,40 @@ def model_ensemble(threads: int, store: str, model: str = "damped") -> dict:
     return res
 
 
-CHECKS = {"compare": compare, "versus_dop853": versus_dop853, "votes": votes, "refusals": refusals,
+def compiled_exponent(threads: int) -> dict:
+    """Three chains of radii [0.3, 0.05, 0.2] run to t = 5 (rtol 1e-6) on the GPU backend with the exponent read at run time and
+    with it compiled in (``CudaBackend(compiled_exponent=True)``, one backend for all three, in this order): Hertz's
+    with RKN4, the same with viscoelastic damping (DP5; the damped force's own powers of n), and n = 3 with RKN4
+    (after the Hertz kernel is compiled: a kernel cache keyed without n would run it with 5/2). Each one's steps,
+    peaks and final state."""
+    import granchain as gc
+    from granchain.backends.cuda import CudaBackend
+
+    hertz = gc.decorated([0.3, 0.05, 0.2])
+    cases = {"hertz": (hertz, gc.RKN4(1e-6, 1e-9)), "damped": (hertz.with_dissipation(0.1), gc.DP5(1e-6, 1e-9)),
+             "n=3": (gc.decorated([0.3, 0.05, 0.2], n=3.0), gc.RKN4(1e-6, 1e-9))}
+    res = {}
+    for name, backend in (("read", CudaBackend(threads)), ("compiled", CudaBackend(threads, compiled_exponent=True))):
+        res[name] = {}
+        for case, (chain, integrator) in cases.items():
+            with warnings.catch_warnings():  # (a pulse still rising at t = 5: PEAK_AT_END)
+                warnings.simplefilter("ignore", RuntimeWarning)
+                r = gc.simulate(chain, integrator, t_max=5.0, backend=backend)
+            res[name][case] = {"status": int(r.status), "n_steps": int(r.n_steps),
+                               "peak_velocity": r.peak_velocity.tolist(), "peak_force": np.asarray(r.peak_force).tolist(),
+                               "positions": np.asarray(r.positions).tolist(), "velocities": np.asarray(r.velocities).tolist()}
+        res[name]["kernels"] = len(backend._kernels)
+    from granchain.backends.cuda.kernel import make_kernel
+
+    try:
+        make_kernel(1, 16, exponent=1.0)
+        res["exponent 1"] = "accepted"
+    except ValueError as exc:
+        res["exponent 1"] = str(exc)
+    return res
+
+
+CHECKS = {"compiled_exponent": compiled_exponent, "compare": compare, "versus_dop853": versus_dop853, "votes": votes, "refusals": refusals,
           "unavailable": unavailable, "model_ensemble": model_ensemble, "rest_ahead": rest_ahead,
           "striker": striker, "sensors": sensors}
 

@@ -28,6 +28,7 @@ PART_LINES = {
     "1 compile": r"^\[1 compile\] decorated N=4 L=32/shared: warm-up",
     "1 gpu L=32/shared": r"^\[1 gpu\] decorated N=4 L=32/shared \(shared exchange.*integration [\d.]+ s",
     "1 gpu L=1": r"^\[1 gpu\] decorated N=4 L=1 \(shared exchange.*integration [\d.]+ s",
+    "1 gpu L=1/n": r"^\[1 gpu\] decorated N=4 L=1/n \(shared exchange.*exponent compiled in\).*integration [\d.]+ s",
     "1 gpu effective": r"^\[1 gpu\] effective N=4 L=32/shared \(shared exchange.*integration [\d.]+ s",
     "1 gpu effective dp5": r"^\[1 gpu\] effective N=4 L=32/shared dp5 \(asked for\) \(shared exchange.*integration [\d.]+ s"
                            r".*dp5 rtol",

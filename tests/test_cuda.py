@@ -258,6 +258,22 @@ def test_force_sensors_of_every_method_and_law(integrator, contact, rtol):
     np.testing.assert_allclose(gpu["wall_force"], cpu["wall_force"], rtol=0, atol=rtol * scale)
 
 
+def test_an_exponent_compiled_into_the_kernel_changes_no_bit():
+    """``CudaBackend(compiled_exponent=True)`` compiles each chain's n into its kernel (for Hertz's 5/2 the general
+    power's code leaves it): Hertz's chain with RKN4, the same damped with DP5 (the damped force's own powers of n)
+    and an n = 3 chain, all on one backend, give the steps, peaks and final state of the kernel that reads n at run
+    time, bit for bit. The n = 3 chain runs after the Hertz kernel is compiled: it gets a kernel of its own (three,
+    where the run-time exponent needs two), else it would run with 5/2, and its peaks are not Hertz's (the control
+    that n reaches the forces). An exponent that is no contact law's is refused."""
+    res = sim("compiled_exponent", 1)
+    for case in ("hertz", "damped", "n=3"):
+        assert res["compiled"][case] == res["read"][case], case
+    assert (res["read"]["kernels"], res["compiled"]["kernels"]) == (2, 3)
+    hertz, cubic = res["read"]["hertz"]["peak_velocity"], res["read"]["n=3"]["peak_velocity"]
+    assert abs(cubic[-1] - hertz[-1]) > 1e-3
+    assert "finite n > 1" in res["exponent 1"]
+
+
 def test_precompressed_granules_ahead_stay_exactly_at_rest():
     """A precompressed chain on the GPU is integrated in displacements from its static state, each contact pushing
     with its force less its static force computed by the same arithmetic: ahead of the pulse that is exactly 0, so

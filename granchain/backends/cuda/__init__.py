@@ -68,7 +68,11 @@ class CudaBackend(Backend):
     chooses the layout (see :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp
     shuffles, the default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's
     integer reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
-    ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch:
+    ``compiled_exponent`` compiles each chain's exponent n into its kernel (one kernel per n, ``make_kernel``'s
+    ``exponent``): the same results, and for Hertz's n = 5/2 the general power's code (libdevice's ``pow``) leaves
+    the kernel, which frees registers on the decorated chains' kernel (measured with ptxas: 255 registers and
+    spills without, 232 and none with) and takes a few from the default one (196 to 203); which is faster is
+    for a GPU to say (``benchmarks/bench_gpu.py``, layout ``32/n``). ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch:
     the device time of the integration and the reduction, synchronised, transfers excluded."""
 
     name = "cuda"
@@ -89,7 +93,7 @@ class CudaBackend(Backend):
     default_chunk_size = 30_000
 
     def __init__(self, threads_per_chain: int = 32, max_registers: int | None = None, exchange: str | None = None,
-                 votes: bool = True):
+                 votes: bool = True, compiled_exponent: bool = False):
         ok, why = available()
         if not ok:
             raise BackendUnavailable(f"the cuda backend cannot run here: {why}. Use the CPU backend "
@@ -109,6 +113,7 @@ class CudaBackend(Backend):
         self.max_registers = max_registers
         self.exchange = exchange
         self.votes = bool(votes) and exchange == "shuffle"
+        self.compiled_exponent = bool(compiled_exponent)
         self.timings: list = []
         self._kernels: dict = {}
 
@@ -131,16 +136,17 @@ class CudaBackend(Backend):
         super().check(integrator, chain)
 
     def _kernel(self, M: int, method: str, fixed: bool, damped: bool, precompressed: bool, plastic: bool = False,
-                sensed: bool = False):
+                sensed: bool = False, n: float | None = None):
         from .kernel import make_kernel
 
         L = self.threads_per_chain
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
-        key = (L, G, method, fixed, damped, precompressed, plastic, sensed)
+        exponent = float(n) if self.compiled_exponent and n is not None else None
+        key = (L, G, method, fixed, damped, precompressed, plastic, sensed, exponent)
         if key not in self._kernels:
             self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed,
-                                             damped, precompressed, plastic, sensed)
+                                             damped, precompressed, plastic, sensed, exponent)
         return L, G, self._kernels[key]
 
     # ------------------------------------------------------------------ runs
@@ -249,7 +255,7 @@ class CudaBackend(Backend):
         # Yielding contacts likewise (effective_integrator): the granules left behind would take their histories.
         assert not (plastic and (steps[3] or steps[5])), "yielding contacts run without goal-oriented zones"
         sensing = sensed is not None and len(sensed) > 0 and T > 0
-        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded, plastic, sensing)
+        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded, plastic, sensing, model.n)
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.

@@ -40,6 +40,8 @@ reduced by ``granchain.backends.cuda.sums``.
 
 from __future__ import annotations
 
+import math
+
 from numba import cuda, float64, int64
 
 from ..._status import MAX_STEPS, NONFINITE, STEP_UNDERFLOW, SUCCESS, T_MAX
@@ -65,7 +67,7 @@ from .methods import ALPHA, DP5_ROWS, dissipated, dissipated_error, make_error, 
 
 def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool = False, votes: bool = True,
                 method: str = "rkn4", fixed: bool = False, damped: bool = False, precompressed: bool = False,
-                plastic: bool = False, sensed: bool = False):
+                plastic: bool = False, sensed: bool = False, exponent: float | None = None):
     """The batch kernel of ``method`` ("rkn4", "dp5" or "verlet") for ``L`` threads per chain and ``G``
     granules per thread (chains of up to ``L * G`` granules). ``L``, ``G``, the method and ``fixed`` are
     constants of its code: Numba prunes the barriers of ``L = 1`` and the other methods' code, and sizes
@@ -129,6 +131,13 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     grid times <= 0 its force at t = 0, behind the trailing window NaN (as the CPU's). Other kernels take both
     as empty tuples.
 
+    ``exponent`` (every method and law): the contact law's exponent n as a constant of the code, for chains of that n
+    only (the host's ``P_N`` is not read). Constant, the branches of ``device.contact_force`` and the damped forces
+    on n fold away: for n = 5/2, Hertz's ``c d sqrt(d)`` is all that is left of the power, and libdevice's general
+    ``pow`` (a call the compiler keeps registers for, though a Hertz chain never takes it) leaves the kernel. The
+    same arithmetic, so the same results bit for bit. None (the default): n read from ``P_N``, one kernel for
+    every n.
+
     Barriers: a group exchanges the stage positions through two alternating shared arrays, so that one
     barrier per force evaluation suffices (a thread can only overwrite an array after every thread has
     passed the next barrier, i.e. finished reading it); per step, one for each force evaluation (RKN4
@@ -148,6 +157,9 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
     bit (integers); ``votes=False`` keeps the butterflies for the benchmark's comparison."""
     VERLET = method == "verlet"
     FIXED = bool(fixed) or VERLET
+    N_FIXED = -1.0 if exponent is None else float(exponent)  # > 0: the exponent compiled in (``exponent``)
+    if exponent is not None and not 1.0 < N_FIXED < math.inf:
+        raise ValueError(f"exponent must be a contact law's finite n > 1 (Hertz: 2.5), got {exponent!r}")
     SG = G if method == "dp5" else 1  # DP5's stage arrays (one element, unused, in the others' kernels)
     MMAX = L * G
     GROUP = L > 1
@@ -269,7 +281,7 @@ def make_kernel(L: int, G: int, max_registers: int | None = None, shuffle: bool 
         exit_margin = prm[P_EXIT_MARGIN]
         peak_rtol = prm[P_PEAK_RTOL]
         max_steps = int64(prm[P_MAX_STEPS])
-        n = prm[P_N]
+        n = N_FIXED if N_FIXED > 0.0 else prm[P_N]
         stop_at_exit = prm[P_STOP_AT_EXIT] > 0.0
         wall = prm[P_WALL] > 0.0
         t_needed = prm[P_T_NEEDED]
