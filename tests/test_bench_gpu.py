@@ -19,9 +19,6 @@ SCRIPT = ROOT / "benchmarks" / "bench_gpu.py"
 #: (the slow suite runs on two workers) would be read as a missing part. The subprocess's timeout stays the guard.
 BUDGET_S, TIMEOUT_S = 540, 600
 
-#: One worker runs both tests, so that the module's smoke run is made once.
-pytestmark = pytest.mark.xdist_group("bench_gpu_smoke")
-
 #: The line each part prints once it has measured (an error or skip line does not count).
 PART_LINES = {
     "machine": r"^\[machine\] device CUDA simulator",
@@ -61,26 +58,18 @@ def missing_lines(text: str) -> list:
     return missing + errors
 
 
-@pytest.fixture(scope="module")
-def smoke_output():
+@pytest.mark.slow
+def test_smoke_run_prints_every_part():
+    """Every part's line, and no error line. Then, as the negative control of that check (in the same test, so
+    that the smoke run is made once wherever pytest-xdist sends it), the output without part 3's lines, or with
+    a part's error line, is reported."""
     env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
     out = subprocess.run([sys.executable, str(SCRIPT), "--smoke", "--budget", str(BUDGET_S)], capture_output=True,
                          text=True, cwd=ROOT, env=env, timeout=TIMEOUT_S)
-    return out
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert missing_lines(out.stdout) == [], out.stdout + out.stderr[-3000:]
 
-
-@pytest.mark.slow
-def test_smoke_run_prints_every_part(smoke_output):
-    assert smoke_output.returncode == 0, smoke_output.stderr[-3000:]
-    assert missing_lines(smoke_output.stdout) == [], smoke_output.stdout + smoke_output.stderr[-3000:]
-
-
-@pytest.mark.slow
-def test_a_missing_or_failed_part_is_noticed(smoke_output):
-    """Negative control of the check above: the smoke run's output without part 3's lines, or with a part's
-    error line, is reported."""
-    text = smoke_output.stdout
-    without = "\n".join(line for line in text.splitlines() if not line.startswith("[3 "))
+    without = "\n".join(line for line in out.stdout.splitlines() if not line.startswith("[3 "))
     assert {"3 cpu decorated", "3 cpu effective", "3 threads"} <= set(missing_lines(without))
-    failed = text + "\n[2 peer error] CudaSupportError: no device\n"
+    failed = out.stdout + "\n[2 peer error] CudaSupportError: no device\n"
     assert missing_lines(failed) == ["[2 peer error] CudaSupportError: no device"]

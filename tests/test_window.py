@@ -121,17 +121,21 @@ def contract_violation(a, b) -> str | None:
             f"peak force {e['f']:.2e} (limit {PEAK_F_RTOL:g}); worst at (0-based) observed granule {e['where'][0]} (velocity), {e['where'][1]} (time), contact {e['where'][2]} (force)")
 
 
-@pytest.fixture(scope="module")
+#: The DOP853 references by (seed, kind), kept for the process: a module fixture's value is not always kept
+#: across the tests a pytest-xdist worker is sent one batch after another (the slow suite runs on two workers).
+_DOP853 = {}
+
+
+@pytest.fixture
 def dop853(reference):
     """``dop853(seed, kind)``: the DOP853 (rtol 1e-10) result of chain_of(seed, kind), computed once."""
-    cache = {}
 
     def get(seed, kind):
-        if (seed, kind) not in cache:
+        if (seed, kind) not in _DOP853:
             result = gc.simulate(chain_of(seed, kind), reference)
             assert result.ok, result.message
-            cache[seed, kind] = result
-        return cache[seed, kind]
+            _DOP853[seed, kind] = result
+        return _DOP853[seed, kind]
 
     return get
 
@@ -215,7 +219,6 @@ def test_peaks_match_dop853(dop853, seed, kind, name):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("dop853_sweep")  # one worker: its DOP853 references are computed once for all integrators
 @pytest.mark.parametrize("kind, name", GOAL_CASES)
 def test_peaks_match_dop853_sweep(dop853, kind, name):
     """20 seeded chains of each kind (DOP853 takes ~2.5 s per decorated chain; cached for all integrators)."""
