@@ -70,10 +70,11 @@ class CudaBackend(Backend):
     integer reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
     ``compiled_exponent`` compiles each chain's exponent n into its kernel (one kernel per n, ``make_kernel``'s
     ``exponent``): the same results, and for Hertz's n = 5/2 the general power's code (libdevice's ``pow``) leaves
-    the kernel, which frees registers on the decorated chains' kernel (measured with ptxas: 255 registers and
-    spills without, 232 and none with) and takes a few from the default one (196 to 203); which is faster is
-    for a GPU to say (``benchmarks/bench_gpu.py``, layout ``32/n``). ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch:
-    the device time of the integration and the reduction, synchronised, transfers excluded."""
+    the kernel, which frees registers on the decorated chains' kernel (measured with ptxas for sm_90: 255 registers
+    and spills without, 232 and none with) and takes a few from the default one (196 to 203); which is faster is
+    for a GPU to say (``benchmarks/bench_gpu.py``, layouts ``32/n`` and ``32/n/200``). ``timings`` receives
+    ``{"kernel_s", "realizations", "launches"}`` for every batch: the device time of the integration and the
+    reduction, synchronised, transfers excluded."""
 
     name = "cuda"
     #: The elastic power law, the damped laws DP5 integrates (``kernel.make_kernel``'s ``damped``) and Thornton's
