@@ -2,7 +2,7 @@
 
 ``CudaBackend`` runs batches of chains (``run_ensemble(..., backend="cuda")``, the design evaluator,
 validity maps) and single chains (``simulate(..., backend="cuda")``) with the kernels of
-:mod:`granchain.backends.cuda.kernel` (its docstring says why a chain is a block of threads, not one
+``granchain.backends.cuda.kernel`` (its docstring says why a chain is a block of threads, not one
 thread). It runs what the CPU kernels run for elastic chains: RKN4 and DP5 with the same step control
 (or a fixed step), velocity Verlet, the same peaks, grid samples and stop rule, and DP5 for chains whose
 contacts dissipate (Kuwabara & Kono's viscoelastic law, the viscous law of Rosas et al.), with the energy
@@ -64,17 +64,41 @@ def available() -> tuple[bool, str]:
 
 
 class CudaBackend(Backend):
-    """RKN4, DP5 and Verlet for elastic chains, DP5 for damped and yielding ones, on an NVIDIA GPU; ``threads_per_chain``
-    chooses the layout (see :data:`LAYOUTS`), ``exchange`` how a chain's threads share values ("shuffle": warp
-    shuffles, the default at 32; "shared": shared memory and barriers), ``votes`` whether the shuffle exchange's
-    integer reductions are warp votes (the default) or shuffle trees (``kernel.make_kernel``: the same results).
-    ``compiled_exponent`` compiles each chain's exponent n into its kernel (one kernel per n, ``make_kernel``'s
-    ``exponent``): the same results, and for Hertz's n = 5/2 the general power's code (libdevice's ``pow``) leaves
-    the kernel, which frees registers on the decorated chains' kernel (measured with ptxas for sm_90: 255 registers
-    and spills without, 232 and none with) and takes a few from the default one (196 to 203); which is faster is
-    for a GPU to say (``benchmarks/bench_gpu.py``, layouts ``32/n`` and ``32/n/200``). ``timings`` receives
-    ``{"kernel_s", "realizations", "launches"}`` for every batch: the device time of the integration and the
-    reduction, synchronised, transfers excluded."""
+    """RKN4, DP5 and Verlet for elastic chains, DP5 for damped and yielding ones, on an NVIDIA GPU.
+
+    Parameters
+    ----------
+    threads_per_chain : int
+        The layout: threads that integrate one chain, one of ``LAYOUTS`` (1, 2, 4, 8, 16, 32, 64). 32, one warp
+        a chain, is the default and measured fastest for the paper's chains; 1 is one thread a chain.
+    max_registers : int, optional
+        A cap on the registers per thread: more chains resident on a multiprocessor, against spills to local
+        memory (``benchmarks/gpu_registers.py`` says what ptxas allots; ``benchmarks/bench_gpu.py`` times it).
+    exchange : {"shuffle", "shared"}, optional
+        How a chain's threads share values: warp shuffles (the default at 32 threads, and only there) or shared
+        memory and barriers (the default otherwise).
+    votes : bool
+        With the shuffle exchange, whether its integer reductions are warp votes (the default) or shuffle trees
+        (``kernel.make_kernel``): the same results.
+    compiled_exponent : bool
+        Compile each chain's exponent n into its kernel (one kernel per n, ``make_kernel``'s ``exponent``), with
+        the same results. For Hertz's n = 5/2 the general power's code (libdevice's ``pow``) leaves the kernel,
+        which frees registers on the decorated chains' kernel (ptxas, sm_90: 255 registers and spills without,
+        232 and none with) and takes a few from the default one (196 to 203). Which is faster is for a GPU to
+        say (``benchmarks/bench_gpu.py``, layouts ``32/n`` and ``32/n/200``); off by default until then.
+
+    Raises
+    ------
+    BackendUnavailable
+        Without an NVIDIA GPU or Numba's CUDA target; the message says what to install or to use the CPU backend.
+    ValueError
+        A layout or exchange it has no kernel for.
+
+    Notes
+    -----
+    ``timings`` receives ``{"kernel_s", "realizations", "launches"}`` for every batch: the device time of the
+    integration and the reduction, synchronised, transfers excluded.
+    """
 
     name = "cuda"
     #: The elastic power law, the damped laws DP5 integrates (``kernel.make_kernel``'s ``damped``) and Thornton's
