@@ -121,8 +121,8 @@ def contract_violation(a, b) -> str | None:
             f"peak force {e['f']:.2e} (limit {PEAK_F_RTOL:g}); worst at (0-based) observed granule {e['where'][0]} (velocity), {e['where'][1]} (time), contact {e['where'][2]} (force)")
 
 
-#: The DOP853 references by (seed, kind), kept for the process: a module fixture's value is not always kept
-#: across the tests a pytest-xdist worker is sent one batch after another (the slow suite runs on two workers).
+#: The DOP853 references by (seed, kind), kept for the process: pytest tears a module fixture down whenever the
+#: next test is in another module, and pytest-xdist's workers (the slow suite runs on two) interleave modules.
 _DOP853 = {}
 
 

@@ -160,14 +160,14 @@ class CudaBackend(Backend):
                              f"{chain.initial!r} does not{cpu}")
         super().check(integrator, chain)
 
-    def _kernel(self, M: int, method: str, fixed: bool, damped: bool, precompressed: bool, plastic: bool = False,
-                sensed: bool = False, n: float | None = None):
+    def _kernel(self, M: int, n: float, method: str, fixed: bool, damped: bool, precompressed: bool,
+                plastic: bool = False, sensed: bool = False):
         from .kernel import make_kernel
 
         L = self.threads_per_chain
         G = max(1, -(-M // L))
         G = 1 << (G - 1).bit_length() if L > 1 else -(-G // 16) * 16  # few compiled variants
-        exponent = float(n) if self.compiled_exponent and n is not None else None
+        exponent = float(n) if self.compiled_exponent else None  # (n in the key only when it is in the code)
         key = (L, G, method, fixed, damped, precompressed, plastic, sensed, exponent)
         if key not in self._kernels:
             self._kernels[key] = make_kernel(L, G, self.max_registers, self.exchange == "shuffle", self.votes, method, fixed,
@@ -280,7 +280,7 @@ class CudaBackend(Backend):
         # Yielding contacts likewise (effective_integrator): the granules left behind would take their histories.
         assert not (plastic and (steps[3] or steps[5])), "yielding contacts run without goal-oriented zones"
         sensing = sensed is not None and len(sensed) > 0 and T > 0
-        L, G, kernel = self._kernel(M, ran.name, fixed, damped, loaded, plastic, sensing, model.n)
+        L, G, kernel = self._kernel(M, model.n, ran.name, fixed, damped, loaded, plastic, sensing)
         wall = chain.boundary.wall
         # Longest first: blocks start in index order, and a launch lasts until its slowest chain ends, so the
         # chains with the fastest oscillators (the most steps) go first. Rows are put back in order after.
