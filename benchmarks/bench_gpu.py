@@ -30,7 +30,13 @@ the same run:
    30,000) and ``[3 threads]``: 1, 2, 4, 8, 16 threads on 1,000 realisations of each kind: speed-up
    over one thread and CPU seconds per realisation (``getrusage(RUSAGE_SELF)``: user + system seconds
    of every thread of the process). Ratio GPU / CPU-16, wall against wall (both ``run_ensemble`` end
-   to end), and CPU wall against GPU integration.
+   to end), and CPU wall against GPU integration. The speed-ups are read against the ``[machine]`` line's
+   CPUs (:func:`cpu_topology`): the physical cores under the CPUs allowed, since two SMT threads of one core
+   share it (16 threads on 8 cores cannot run 16x one thread), and a cgroup CPU quota where one is set; the
+   summary's CPU lines repeat the cores. Each ``[3 threads]`` line splits the wall into the time inside the
+   compiled kernels (the parallel region) and outside them (serial: draws, chain arrays, the pilot's windows,
+   the Dataset; :class:`KernelClock`), so that a speed-up short of the thread count says whether the kernels
+   or the serial part fell short.
 4. ``[4 reproduce]``: ``granchain reproduce --backend cuda --out DIR`` in a subprocess (wall time,
    compilation and figures included; 8 ensembles of 30,000) and the integration time of that same
    run (the CUDA backends' ``timings``, read by a small driver around the command). Skipped, saying
@@ -343,6 +349,7 @@ class Run:
     results: dict = field(default_factory=dict)  # summary numbers by TARGETS key
     data: dict = field(default_factory=dict)  # datasets and timings kept for later parts
     device: str = ""
+    cores: int | None = None  # physical cores under the CPUs allowed (cpu_topology)
 
     def line(self, label: str, text: str) -> None:
         print(f"[{label}] {text}", flush=True)
@@ -379,6 +386,44 @@ def device_name() -> str:
     except Exception as exc:  # noqa: BLE001 (no device: the peer's part then fails with its own error)
         return f"no CUDA device ({type(exc).__name__}: {exc})"
     return name.decode() if isinstance(name, bytes) else str(name)
+
+
+def cpu_topology() -> tuple:
+    """(physical cores, a line): the CPUs this process may run on, as the CPU speed-ups need them read. Two
+    threads of one core (SMT) share its units, so 16 threads on 8 cores cannot run 16x one thread; a cgroup
+    quota below the CPUs allowed caps the speed-up at the quota. The physical cores are the distinct
+    (package, core) pairs of the allowed CPUs (Linux sysfs; None where it cannot be read)."""
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else list(range(os.cpu_count() or 1))
+    cores = set()
+    try:
+        for c in allowed:
+            topo = Path(f"/sys/devices/system/cpu/cpu{c}/topology")
+            cores.add(((topo / "physical_package_id").read_text().strip(), (topo / "core_id").read_text().strip()))
+    except OSError:
+        cores = None
+    quota = "no cgroup CPU quota"
+    try:  # cgroup v2: "max 100000" (none) or "<quota> <period>" in microseconds
+        q, period = Path("/sys/fs/cgroup/cpu.max").read_text().split()[:2]
+        if q != "max":
+            quota = f"cgroup CPU quota {int(q) / int(period):g} CPUs"
+    except (OSError, ValueError):
+        try:  # cgroup v1
+            q = int(Path("/sys/fs/cgroup/cpu/cpu.cfs_quota_us").read_text())
+            if q > 0:
+                quota = f"cgroup CPU quota {q / int(Path('/sys/fs/cgroup/cpu/cpu.cfs_period_us').read_text()):g} CPUs"
+        except (OSError, ValueError):
+            quota = "cgroup CPU quota unknown"
+    model = platform.processor() or platform.machine()
+    try:
+        model = next(ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
+                     if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    n_cores = len(cores) if cores else None
+    per_core = len(allowed) / n_cores if n_cores else 0
+    where = (f"on {n_cores} physical cores ({per_core:g} thread{'' if per_core == 1 else 's'} per core)" if n_cores
+             else "on physical cores unknown (no sysfs topology)")
+    return n_cores, f"{len(allowed)} CPUs allowed {where}; {quota}; {model}"
 
 
 def cpu_seconds() -> float:
@@ -528,11 +573,49 @@ def part_peer(run: Run) -> None:
                            f"(granules 2..N-1) {worst(dt):.2e} (contract 1e-6, 1e-5){run.tag}")
 
 
+class KernelClock:
+    """Wall seconds inside the CPU backend's compiled batch kernel (``granchain.backends.numba_backend``'s
+    ``integrate_batch``: the parallel region, the threads' own reductions included) while the block runs; the
+    rest of an ensemble's wall is its serial part (draws, chain arrays, buffers, the pilot's windows, the
+    Dataset), which caps the speed-up over one thread (Amdahl). NaN where that function is not there."""
+
+    def __init__(self):
+        self.seconds = 0.0
+        self._orig = None
+
+    def __enter__(self):
+        import granchain.backends.numba_backend as nb
+
+        self._orig = getattr(nb, "integrate_batch", None)
+        if self._orig is None:
+            self.seconds = math.nan
+            return self
+
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return self._orig(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - t0
+
+        nb.integrate_batch = timed
+        return self
+
+    def __exit__(self, *exc):
+        if self._orig is not None:
+            import granchain.backends.numba_backend as nb
+
+            nb.integrate_batch = self._orig
+        return False
+
+
 def timed_cpu(run: Run, chains: str, R: int, threads: int):
-    """(Dataset, wall s, CPU s) of a CPU-backend ensemble."""
-    c0, t0 = cpu_seconds(), time.perf_counter()
-    ds = ensemble(run, R, 0, chains, threads=threads)
-    return ds, time.perf_counter() - t0, cpu_seconds() - c0
+    """(Dataset, wall s, CPU s, wall s inside the compiled kernels) of a CPU-backend ensemble."""
+    with KernelClock() as clock:
+        c0, t0 = cpu_seconds(), time.perf_counter()
+        ds = ensemble(run, R, 0, chains, threads=threads)
+        wall = time.perf_counter() - t0
+    return ds, wall, cpu_seconds() - c0, clock.seconds
 
 
 def part_cpu(run: Run) -> None:
@@ -550,7 +633,7 @@ def part_cpu(run: Run) -> None:
     for chains in ("decorated", "effective"):
         R = s.cpu16
         scale = s.realizations / R
-        _, wall, cpu = timed_cpu(run, chains, R, top)
+        _, wall, cpu, _ = timed_cpu(run, chains, R, top)
         line = (f"CPU {chains} N={s.n_large}, threads={top}{note}: {R:,} realisations scaled x{scale:g} to "
                 f"{s.realizations:,}: wall {wall * scale:.2f} s, CPU {cpu / R * 1e3:.3f} ms per realisation")
         gpu = run.data.get((chains, layout_key(run.sizes.reference)))
@@ -565,14 +648,16 @@ def part_cpu(run: Run) -> None:
     for chains in ("decorated", "effective"):
         base = None
         for th in sweep:
-            ds, wall, cpu = timed_cpu(run, chains, s.sweep, th)
+            ds, wall, cpu, inside = timed_cpu(run, chains, s.sweep, th)
             base = base or wall
             if th == 1:
                 run.data[("cpu", chains)] = ds
             run.line("3 threads", f"CPU {chains} N={s.n_large}, {th:>2} threads, {s.sweep:,} realisations: wall {wall:.2f} s, "
-                                  f"speed-up over 1 thread {base / wall:.2f}x, CPU {cpu / s.sweep * 1e3:.3f} ms per realisation")
+                                  f"speed-up over 1 thread {base / wall:.2f}x, CPU {cpu / s.sweep * 1e3:.3f} ms per realisation; "
+                                  f"in the kernels {inside:.3f} s, outside them (serial) {wall - inside:.3f} s")
         if top == 16:
-            run.results[f"CPU 16 threads {chains}"] = (base / wall, "wall(1 thread) / wall(16)")
+            on = f", {run.cores} physical cores" if run.cores else ""
+            run.results[f"CPU 16 threads {chains}"] = (base / wall, f"wall(1 thread) / wall(16){on}")
 
 
 #: Run in the subprocess of part 4: ``granchain reproduce`` with its arguments, and afterwards one line
@@ -816,10 +901,11 @@ def main(argv=None) -> int:
 
     run = Run(sizes, stub, args.smoke, parts)
     run.device = device_name()
+    run.cores, topology = cpu_topology()
     rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT).stdout.strip()
     run.line("machine", f"device {run.device}; {os.cpu_count()} CPUs (Numba threads {numba.config.NUMBA_NUM_THREADS}); "
                         f"{platform.machine()}, Python {platform.python_version()}, numba {numba.__version__}, granchain "
-                        f"{gc.__version__} ({rev or 'no git'}); load average {os.getloadavg()[0]:.2f}; "
+                        f"{gc.__version__} ({rev or 'no git'}); load average {os.getloadavg()[0]:.2f}; CPUs: {topology}; "
                         f"{'smoke' if args.smoke else 'full'} run, budget {sizes.budget_s:.0f} s; GPU backend: "
                         f"{'stub' if stub else 'granchain.backends.cuda.CudaBackend'}")
     for p in parts:

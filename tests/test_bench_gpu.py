@@ -21,7 +21,8 @@ BUDGET_S, TIMEOUT_S = 540, 600
 
 #: The line each part prints once it has measured (an error or skip line does not count).
 PART_LINES = {
-    "machine": r"^\[machine\] device CUDA simulator",
+    "machine": r"^\[machine\] device CUDA simulator.*CPUs: \d+ CPUs allowed on (\d+ physical cores \([\d.]+ threads? "
+               r"per core\)|physical cores unknown)",
     "1 compile": r"^\[1 compile\] decorated N=4 L=32/shared: warm-up",
     "1 gpu L=32/shared": r"^\[1 gpu\] decorated N=4 L=32/shared \(shared exchange.*integration [\d.]+ s",
     "1 gpu L=1": r"^\[1 gpu\] decorated N=4 L=1 \(shared exchange.*integration [\d.]+ s",
@@ -34,7 +35,8 @@ PART_LINES = {
     "2 accuracy": r"^\[2 accuracy\] peer vs the GPU backend .*largest relative peak-velocity difference",
     "3 cpu decorated": r"^\[3 cpu\] CPU decorated N=4, threads=\d+.*GPU L=32 / CPU-\d+: [\d.]+x",
     "3 cpu effective": r"^\[3 cpu\] CPU effective N=4, threads=\d+",
-    "3 threads": r"^\[3 threads\] CPU decorated N=4,  1 threads.*speed-up over 1 thread 1\.00x",
+    "3 threads": r"^\[3 threads\] CPU decorated N=4,  1 threads.*speed-up over 1 thread 1\.00x.*in the kernels [\d.]+ s, "
+                 r"outside them \(serial\) -?[\d.]+ s",
     "4 reproduce": r"^\[4 reproduce\] `granchain reproduce .*wall [\d.]+ s",
     "5 agree decorated": r"^\[5 agree\] decorated N=4, .*within the contract",
     "5 agree effective": r"^\[5 agree\] effective N=4, .*within the contract",
