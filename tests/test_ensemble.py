@@ -652,3 +652,63 @@ def test_the_ensemble_queue_gives_every_row_to_exactly_one_thread():
     assert np.all(hits == 1)
     assert taken[0] == hits.size + threads
     assert by_thread.sum() == hits.size and (threads == 1 or np.all(by_thread > 0))
+
+
+@pytest.mark.parametrize("family", [gc.RandomDecorated(6), gc.RandomRadii(5, gc.Uniform(0.8, 1.2)),
+                                    gc.BinaryRandom(7, p=0.3)], ids=lambda f: f.kind)
+@pytest.mark.parametrize("chunk_size", [1, 15, 16, 17, 40])
+def test_chunk_draws_in_groups_are_one_draw_row_for_row(family, chunk_size):
+    """The helper thread draws a chunk's parameters in groups of ``run.DRAW_GROUP`` realisations, yielding the
+    GIL between them: every parameter of every chunk is bitwise that of one ``draw_batch`` call over the
+    chunk, whatever the chunk size against the group (below, at, above, several groups)."""
+    from granchain.ensembles import run as ens
+
+    spec = ens.EnsembleSpec(family, 90, 11, family.chains[:1], chunk_size=chunk_size)
+    for j in (0, spec.n_chunks - 1):
+        sl = spec.chunk_slice(j)
+        grouped, whole = ens._draw(spec, j), family.draw_batch(11, np.arange(sl.start, sl.stop))
+        assert grouped.keys() == whole.keys()
+        for name in whole:
+            assert grouped[name].dtype == whole[name].dtype and grouped[name].tobytes() == whole[name].tobytes(), name
+
+
+def test_the_first_chunk_is_drawn_while_the_pilot_runs(monkeypatch):
+    """A new run's first chunk is drawn on the helper thread while the pilot sets the averaged-pulse windows
+    (after it, the draws left every core but one idle), each chunk is drawn once, and the result is bitwise
+    the run's without the overlap. The pilot here waits until chunk 0's draw has begun: drawn after the
+    pilot, it would not begin, and the pilot would give up after 30 s. Negative control: the same wait for
+    chunk 1, which is drawn only once chunk 0 is integrated, gives up (after 1 s)."""
+    import threading
+
+    from granchain.ensembles import pulse_window
+    from granchain.ensembles import run as ens
+
+    def run():
+        return gc.run_ensemble(gc.RandomDecorated(6), realizations=96, seed=4, chunk_size=32, progress=False)
+
+    plain = run()
+    draw, window_ends = ens._draw, pulse_window.window_ends
+    begun = {j: threading.Event() for j in range(3)}
+    drawn, waits = [], []
+
+    def counted_draw(spec, j):
+        drawn.append(j)
+        begun[j].set()
+        return draw(spec, j)
+
+    monkeypatch.setattr(ens, "_draw", counted_draw)
+    for j, timeout, expected in ((0, 30.0, True), (1, 1.0, False)):
+        def pilot_waiting(spec, compute_rows, j=j, timeout=timeout):
+            waits.append(begun[j].wait(timeout))
+            return window_ends(spec, compute_rows)
+
+        monkeypatch.setattr(pulse_window, "window_ends", pilot_waiting)
+        for event in begun.values():
+            event.clear()
+        drawn.clear()
+        waits.clear()
+        other = run()
+        assert waits == [expected], (j, waits)
+        assert sorted(drawn) == [0, 1, 2], drawn
+        for name in plain.data_vars:
+            assert plain[name].values.tobytes() == other[name].values.tobytes(), name

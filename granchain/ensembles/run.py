@@ -14,6 +14,7 @@ bitwise identical to an uninterrupted run.
 from __future__ import annotations
 
 import sys
+import time
 import warnings
 
 import numpy as np
@@ -235,7 +236,21 @@ def run_ensemble(family=26, distribution=None, realizations: int = 1000, seed: i
 def _run(spec: EnsembleSpec, out, resume: bool, client, threads, report) -> xarray.Dataset:
     """:func:`run_ensemble` once its arguments are checked: the averaged-pulse windows, the chunks, the
     store."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1, thread_name_prefix="granchain-chunks") as helper:
+        return _run_with(spec, out, resume, client, threads, report, helper)
+
+
+def _run_with(spec: EnsembleSpec, out, resume: bool, client, threads, report, helper) -> xarray.Dataset:
+    """:func:`_run` with its helper thread (``_run_local``'s)."""
+    ahead = None
     if spec.has_pulse_windows and spec.pulse_ends is None:
+        if client is None:
+            # The first chunk's draws (chunk 0 of a new run) are made while the pilot integrates: after it,
+            # they left every core but one idle (~16 us a realisation: ~8 ms a CPU chunk of 500, ~0.5 s a
+            # GPU chunk of 30,000). They do not depend on the windows.
+            ahead = (0, helper.submit(_draw, spec, 0))
         spec = _with_pulse_windows(spec, out if resume else None, threads, report)
     sink = MemorySink(spec) if out is None else ZarrSink(spec, out, bool(resume), log=report.message)
     futures = []
@@ -243,7 +258,7 @@ def _run(spec: EnsembleSpec, out, resume: bool, client, threads, report) -> xarr
         pending = sink.pending()
         report.start(spec.realizations - sum(_size(spec.chunk_slice(j)) for j in pending), len(pending))
         if client is None:
-            _run_local(spec, sink, pending, threads, report)
+            _run_local(spec, sink, pending, threads, report, helper, ahead)
         else:
             from distributed import as_completed
 
@@ -262,14 +277,15 @@ def _run(spec: EnsembleSpec, out, resume: bool, client, threads, report) -> xarr
                  if out is not None else "no out= store was given, so nothing was saved")
         raise EnsembleInterrupted(f"interrupted: {where}") from None
     finally:
+        helper.shutdown(wait=True)  # the chunk being written (an interruption's too) is in before the store closes
         if out is not None:
             sink.close()
 
 
-def _run_local(spec: EnsembleSpec, sink, pending: list, threads, report) -> None:
+def _run_local(spec: EnsembleSpec, sink, pending: list, threads, report, helper, ahead=None) -> None:
     """The chunks ``pending`` in order on this machine, with the work around the kernels done beside them.
 
-    One helper thread draws the next chunk's random parameters and writes the last finished chunk into
+    The ``helper`` thread draws the next chunk's random parameters and writes the last finished chunk into
     the sink while this thread runs the kernels, which release the GIL (``kernels.jit.JIT_PARALLEL``).
     That work is serial: done between the kernels it left every core but one idle for its duration,
     which was 2.5 % of an effective-chain ensemble on one thread (the draws; 1.6 % more with a store, its
@@ -277,30 +293,45 @@ def _run_local(spec: EnsembleSpec, sink, pending: list, threads, report) -> None
     Creating and closing a store stay serial. The results are those of the
     plain order (realisation i's parameters depend on (seed, i) alone, and each chunk is written whole,
     in order). A chunk counts as done once written; an interruption waits for the chunk being written,
-    so finished work is never lost."""
-    from concurrent.futures import ThreadPoolExecutor
-
+    so finished work is never lost (``_run`` shuts the helper down before it closes the store).
+    ``ahead``: (chunk, the future of its draws) begun earlier (during the pilot), used if that chunk comes
+    first."""
     # Batches within a chunk only where they are shown (the bar); otherwise one kernel call per chunk.
     within = report.update if report.mode == "bar" else None
-    with ThreadPoolExecutor(1, thread_name_prefix="granchain-chunks") as helper:
-        drawn = helper.submit(_draw, spec, pending[0]) if pending else None
-        writing = None  # (the write's future, chunk, realisations)
-        for k, j in enumerate(pending):
-            params = drawn.result()
-            drawn = helper.submit(_draw, spec, pending[k + 1]) if k + 1 < len(pending) else None
-            res = compute_chunk(spec, j, threads=threads, on_progress=within, params=params)
-            if writing is not None:
-                _written(writing, report, within)
-            writing = (helper.submit(sink.write, res), j, res["realizations"])
+    drawn = None
+    if pending:
+        drawn = ahead[1] if ahead is not None and ahead[0] == pending[0] else helper.submit(_draw, spec, pending[0])
+    writing = None  # (the write's future, chunk, realisations)
+    for k, j in enumerate(pending):
+        params = drawn.result()
+        drawn = helper.submit(_draw, spec, pending[k + 1]) if k + 1 < len(pending) else None
+        res = compute_chunk(spec, j, threads=threads, on_progress=within, params=params)
         if writing is not None:
             _written(writing, report, within)
-        # (leaving the block waits for the helper's last task: on an interruption, the chunk being written)
+        writing = (helper.submit(sink.write, res), j, res["realizations"])
+    if writing is not None:
+        _written(writing, report, within)
+
+
+#: Realisations drawn between two yields of the GIL by the helper thread (:func:`_draw`).
+DRAW_GROUP = 16
 
 
 def _draw(spec: EnsembleSpec, j: int) -> dict:
-    """The family's random parameters of chunk j (``ChainFamily.draw_batch``)."""
+    """The family's random parameters of chunk j (``ChainFamily.draw_batch``), drawn in groups of
+    :data:`DRAW_GROUP` realisations with the GIL let go between them. The draws are Python (~16 us a
+    realisation: a generator per realisation, so that realisation i depends on (seed, i) alone) and run on
+    the helper thread beside this thread's work; without the yields this thread, back from a kernel and
+    wanting the GIL, waited up to the interpreter's switch interval (5 ms) each time it did. The
+    parameters are those of one ``draw_batch`` call, row for row."""
     sl = spec.chunk_slice(j)
-    return spec.family.draw_batch(spec.seed, np.arange(sl.start, sl.stop))
+    groups = []
+    for start in range(sl.start, sl.stop, DRAW_GROUP):
+        groups.append(spec.family.draw_batch(spec.seed, np.arange(start, min(start + DRAW_GROUP, sl.stop))))
+        time.sleep(0)  # lets the GIL go: a thread waiting for it takes it now
+    if len(groups) == 1:
+        return groups[0]
+    return {name: np.concatenate([g[name] for g in groups]) for name in groups[0]}
 
 
 def _written(writing: tuple, report, within) -> None:
