@@ -321,9 +321,9 @@ def _draw(spec: EnsembleSpec, j: int) -> dict:
     """The family's random parameters of chunk j (``ChainFamily.draw_batch``), drawn in groups of
     :data:`DRAW_GROUP` realisations with the GIL let go between them. The draws are Python (~16 us a
     realisation: a generator per realisation, so that realisation i depends on (seed, i) alone) and run on
-    the helper thread beside this thread's work; without the yields this thread, back from a kernel and
-    wanting the GIL, waited up to the interpreter's switch interval (5 ms) each time it did. The
-    parameters are those of one ``draw_batch`` call, row for row."""
+    the helper thread beside the main thread's work; without the yields the main thread, wanting the GIL
+    back (from a kernel, or between its own NumPy calls), waited up to the interpreter's switch interval
+    (5 ms) each time. The parameters are those of one ``draw_batch`` call, row for row."""
     sl = spec.chunk_slice(j)
     groups = []
     for start in range(sl.start, sl.stop, DRAW_GROUP):
