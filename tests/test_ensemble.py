@@ -675,7 +675,7 @@ def test_chunk_draws_in_groups_are_one_draw_row_for_row(family, chunk_size):
 def test_the_first_chunk_is_drawn_while_the_pilot_runs(monkeypatch):
     """A new run's first chunk is drawn on the helper thread while the pilot sets the averaged-pulse windows
     (after it, the draws left every core but one idle), each chunk is drawn once, and the result is bitwise
-    the run's without the overlap. The pilot here waits until chunk 0's draw has begun: drawn after the
+    the same however the draws and the pilot interleave. The pilot here waits until chunk 0's draw has begun: drawn after the
     pilot, it would not begin, and the pilot would give up after 30 s. Negative control: the same wait for
     chunk 1, which is drawn only once chunk 0 is integrated, gives up (after 1 s)."""
     import threading
