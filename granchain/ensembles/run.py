@@ -246,12 +246,8 @@ def _run_with(spec: EnsembleSpec, out, resume: bool, client, threads, report, he
     """:func:`_run` with its helper thread (``_run_local``'s)."""
     ahead = None
     if spec.has_pulse_windows and spec.pulse_ends is None:
-        if client is None:
-            # The first chunk's draws (chunk 0 of a new run) are made while the pilot integrates: after it,
-            # they left every core but one idle (~16 us a realisation: ~8 ms a CPU chunk of 500, ~0.5 s a
-            # GPU chunk of 30,000). They do not depend on the windows.
-            ahead = (0, helper.submit(_draw, spec, 0))
-        spec = _with_pulse_windows(spec, out if resume else None, threads, report)
+        spec, ahead = _with_pulse_windows(spec, out if resume else None, threads, report,
+                                          helper if client is None else None)
     sink = MemorySink(spec) if out is None else ZarrSink(spec, out, bool(resume), log=report.message)
     futures = []
     try:
@@ -294,8 +290,8 @@ def _run_local(spec: EnsembleSpec, sink, pending: list, threads, report, helper,
     plain order (realisation i's parameters depend on (seed, i) alone, and each chunk is written whole,
     in order). A chunk counts as done once written; an interruption waits for the chunk being written,
     so finished work is never lost (``_run`` shuts the helper down before it closes the store).
-    ``ahead``: (chunk, the future of its draws) begun earlier (during the pilot), used if that chunk comes
-    first."""
+    ``ahead``: (chunk, the future of its draws) begun during the pilot (:func:`_with_pulse_windows`), used if
+    that chunk comes first."""
     # Batches within a chunk only where they are shown (the bar); otherwise one kernel call per chunk.
     within = report.update if report.mode == "bar" else None
     drawn = None
@@ -355,19 +351,25 @@ def _compile_ahead(spec: EnsembleSpec, client):
     return backend, backend.prepare(integrators)
 
 
-def _with_pulse_windows(spec: EnsembleSpec, out, threads, report) -> EnsembleSpec:
-    """``spec`` with its averaged-pulse windows set: those of the store ``out`` when it was started with
-    windows (a store is continued with its own), else from the pilot realisations
-    (:func:`granchain.ensembles.pulse_window.window_ends`)."""
+def _with_pulse_windows(spec: EnsembleSpec, out, threads, report, helper=None) -> tuple:
+    """(``spec`` with its averaged-pulse windows set, ``ahead``): the windows of the store ``out`` when it was
+    started with windows (a store is continued with its own), else from the pilot realisations
+    (:func:`granchain.ensembles.pulse_window.window_ends`). While the pilot integrates, ``helper`` (a local
+    run's helper thread, or None) draws chunk 0, the first of a new run: after the pilot, those draws left
+    every core but one idle (~16 us a realisation: ~8 ms a CPU chunk of 500, ~0.5 s a GPU chunk of 30,000).
+    They do not depend on the windows. ``ahead``: (0, the future of those draws), or None."""
     import dataclasses
 
     record = _window.stored_record(out) if out is not None else None
     ends = _window.ends_of_record(record.get("pulse_window")) if record is not None else None
+    ahead = None
     if ends is None:
         report.message(f"setting each granule's averaged-pulse window from the arrival times of realisations "
                        f"0..{_window.PILOT_REALIZATIONS - 1}")
+        if helper is not None:
+            ahead = (0, helper.submit(_draw, spec, 0))
         ends = _window.window_ends(spec, lambda pilot: compute_chunk(pilot, 0, threads=threads))
-    return dataclasses.replace(spec, pulse_ends=ends)
+    return dataclasses.replace(spec, pulse_ends=ends), ahead
 
 
 class EnsembleInterrupted(KeyboardInterrupt):
