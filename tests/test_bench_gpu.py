@@ -9,6 +9,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -75,3 +76,33 @@ def test_smoke_run_prints_every_part():
     assert {"3 cpu decorated", "3 cpu effective", "3 threads"} <= set(missing_lines(without))
     failed = out.stdout + "\n[2 peer error] CudaSupportError: no device\n"
     assert missing_lines(failed) == ["[2 peer error] CudaSupportError: no device"]
+
+
+def test_kernel_clock_times_the_cpu_kernels(monkeypatch):
+    """The ``[3 threads]`` lines' split of the wall (``KernelClock``) times the CPU backend's batch kernel
+    through the module global it wraps: were the backend to call the kernel by another name, the clock would
+    read 0 and every CPU speed-up would look serial-bound. A run inside the clock adds its kernel time; the
+    same run after it adds nothing, and the backend's own function is back."""
+    import importlib.util
+
+    import granchain as gc
+    import granchain.backends.numba_backend as nb
+
+    spec = importlib.util.spec_from_file_location("bench_gpu", SCRIPT)
+    bench = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "bench_gpu", bench)  # its dataclasses look their module up while it loads
+    spec.loader.exec_module(bench)
+    original = nb.integrate_batch
+
+    def ensemble():
+        t0 = time.perf_counter()
+        gc.run_ensemble(gc.RandomDecorated(4), realizations=8, chains="effective", progress=False)
+        return time.perf_counter() - t0
+
+    ensemble()  # compiled (or loaded from the cache) outside the measurement
+    with bench.KernelClock() as clock:
+        wall = ensemble()
+    assert 0.0 < clock.seconds <= wall
+    inside = clock.seconds
+    ensemble()
+    assert clock.seconds == inside and nb.integrate_batch is original
