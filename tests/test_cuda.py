@@ -6,7 +6,9 @@ GPU's fused multiply-adds, so there the GPU kernels must reproduce the CPU kerne
 rounding: a test that checks them against each other within 1e-12 catches any difference in method,
 step control, window, peak search or stop rule. On a GPU they agree within the accuracy contract
 (``benchmarks/bench_gpu.py`` measures it on 1,000 chains of each kind). The simulator is slow (a minute
-to several per check), so the kernel checks are marked ``slow``; the refusals run with the fast tests.
+to several per check), so the kernel checks are marked ``slow``; the refusals run with the fast tests, and so do
+three quick kernel checks (seconds each: the aligned pulse's sums, a precompressed chain's granules at rest, warp
+votes), so that the README's test command runs the CUDA kernels too.
 """
 
 from __future__ import annotations
@@ -215,7 +217,7 @@ def test_the_aligned_pulse_is_summed_on_the_gpu():
 
 
 @pytest.mark.parametrize("threads, wall, load, repeats, t_end", [
-    pytest.param(1, True, 0.0, 1, 14.0, id="wall"),
+    pytest.param(1, True, 0.0, 1, 14.0, id="wall", marks=pytest.mark.slow),
     pytest.param(4, True, 1e-3, 1, 14.0, id="shared memory, loaded", marks=pytest.mark.slow),
     pytest.param(1, False, 0.0, 3, 30.0, id="trailing window", marks=pytest.mark.slow),
 ])
@@ -258,6 +260,7 @@ def test_force_sensors_of_every_method_and_law(integrator, contact, rtol):
     np.testing.assert_allclose(gpu["wall_force"], cpu["wall_force"], rtol=0, atol=rtol * scale)
 
 
+@pytest.mark.slow
 def test_an_exponent_compiled_into_the_kernel_changes_no_bit():
     """``CudaBackend(compiled_exponent=True)`` compiles each chain's n into its kernel (for Hertz's 5/2 the general
     power's code leaves it): Hertz's chain with RKN4, the same damped with DP5 (the damped force's own powers of n)
@@ -287,6 +290,7 @@ def test_precompressed_granules_ahead_stay_exactly_at_rest():
     assert any(r != 0.0 for r in res["residual"])
 
 
+@pytest.mark.slow
 def test_a_striker_on_a_loaded_chain_against_a_wall_is_the_cpus():
     """Real contacts together on the GPU (one thread per chain): a striker of twice the first granule's mass, a
     static load and a wall: the CPU's steps, peaks, wall force and energy balance to rounding."""
